@@ -1,0 +1,272 @@
+"""Parameters of the three-block cascade NS -> LD -> ND (Vörös 2016, eqs. 1-11)."""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+
+@dataclasses.dataclass(frozen=True)
+class Orders:
+    """Model orders; they fix every array shape, so they are static.
+
+    - `nR`, `nL`: number of right / left segments of the piecewise-linear block (>= 1).
+    - `r`: numerator order of the linear block, `A(q) = q^-1 + a2 q^-2 + ... + ar q^-r` (>= 1).
+    - `p`: denominator order, `B(q) = b1 q^-1 + ... + bp q^-p` (>= 0).
+    """
+
+    nR: int = 2
+    nL: int = 2
+    r: int = 2
+    p: int = 2
+
+    def __post_init__(self):
+        for field, low in (("nR", 1), ("nL", 1), ("r", 1), ("p", 0)):
+            value = getattr(self, field)
+            if not isinstance(value, int | np.integer) or value < low:
+                raise ValueError(f"Order {field} must be an integer >= {low}, got {value!r}.")
+
+    @classmethod
+    def parse(cls, text: str) -> Orders:
+        """Read orders from `"nR,nL,r,p"`."""
+        parts = [part.strip() for part in str(text).split(",")]
+        if len(parts) != 4 or not all(part.lstrip("-").isdigit() for part in parts):
+            raise ValueError(f"Orders must be four integers 'nR,nL,r,p', got {text!r}.")
+        return cls(*(int(part) for part in parts))
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """Parameter names in theta order (eq. 18), with `cR` in place of `C = cR mR`."""
+        return (
+            tuple(f"MR{i}" for i in range(1, self.nR + 1))
+            + tuple(f"DR{i}" for i in range(1, self.nR))
+            + tuple(f"ML{j}" for j in range(1, self.nL + 1))
+            + tuple(f"DL{j}" for j in range(1, self.nL))
+            + tuple(f"a{i}" for i in range(2, self.r + 1))
+            + tuple(f"b{j}" for j in range(1, self.p + 1))
+            + ("cL", "mR", "cR")
+        )
+
+    @property
+    def size(self) -> int:
+        """Number of free parameters (length of theta)."""
+        return 2 * self.nR + 2 * self.nL - 2 + (self.r - 1) + self.p + 3
+
+    @property
+    def min_samples(self) -> int:
+        """Fewest samples for which the regression can be overdetermined."""
+        return 2 * self.size + max(self.r, self.p) + 1
+
+    def __str__(self) -> str:
+        return f"{self.nR},{self.nL},{self.r},{self.p}"
+
+
+_ARRAY_FIELDS = ("MR", "DR", "ML", "DL", "a", "b", "cL", "mR", "cR")
+
+
+def _is_concrete(*values) -> bool:
+    return not any(isinstance(value, jax.core.Tracer) for value in values)
+
+
+class CascadeParams(eqx.Module):
+    """Parameters of the cascade, normalised by `mL = 1` and `a1 = 1` (eq. 12).
+
+    NS (eq. 1): `v = sum_i MR_i h(DR_{i-1} - u)(u - DR_{i-1}) + sum_j ML_j h(u - DL_{j-1})(u - DL_{j-1})`
+    with `DR_0 = DL_0 = 0`; slopes are increments, the slope of right segment k is
+    `MR_1 + ... + MR_k`.
+    LD (eq. 6): `x(t) = v(t-1) + sum_{i>=2} a_i v(t-i) - sum_j b_j x(t-j)`.
+    ND (eq. 9): backlash with slopes `mL = 1`, `mR` and gaps `cL`, `cR`.
+
+    Fields (shapes follow `orders`, a static field):
+    - `MR`: `Float[Array, " nR"]`, `DR`: `Float[Array, " nR-1"]` (increasing, > 0).
+    - `ML`: `Float[Array, " nL"]`, `DL`: `Float[Array, " nL-1"]` (decreasing, < 0).
+    - `a`: `Float[Array, " r-1"]` holding a2..ar; `b`: `Float[Array, " p"]`.
+    - `cL`, `mR`, `cR`: scalars (`mR > 0`, gaps >= 0).
+
+    Leading batch dimensions are allowed on every array field (for `vmap`); the
+    invariants are checked once at construction, and only on concrete values.
+    """
+
+    MR: Float[Array, "... nR"]
+    DR: Float[Array, "... nRm1"]
+    ML: Float[Array, "... nL"]
+    DL: Float[Array, "... nLm1"]
+    a: Float[Array, "... rm1"]
+    b: Float[Array, "... p"]
+    cL: Float[Array, ...]
+    mR: Float[Array, ...]
+    cR: Float[Array, ...]
+    orders: Orders = eqx.field(static=True)
+
+    def __check_init__(self):
+        o = self.orders
+        lengths = {
+            "MR": (self.MR, o.nR, "nR"),
+            "DR": (self.DR, o.nR - 1, "nR - 1"),
+            "ML": (self.ML, o.nL, "nL"),
+            "DL": (self.DL, o.nL - 1, "nL - 1"),
+            "a": (self.a, o.r - 1, "r - 1 (a2..ar)"),
+            "b": (self.b, o.p, "p"),
+        }
+        for name, (value, expected, what) in lengths.items():
+            if jnp.shape(value)[-1:] != (expected,):
+                raise ValueError(
+                    f"{name} must have length {what} = {expected} for orders {o}, "
+                    f"got shape {jnp.shape(value)}."
+                )
+        if not _is_concrete(self.DR, self.DL, self.cL, self.mR, self.cR):
+            return
+        DR, DL = np.asarray(self.DR), np.asarray(self.DL)
+        if not np.all(
+            np.isfinite(np.concatenate([np.ravel(np.asarray(f)) for f in self._arrays()]))
+        ):
+            raise ValueError("Parameters must be finite; got NaN or inf.")
+        if DR.shape[-1] and (np.any(DR[..., 0] <= 0) or np.any(np.diff(DR, axis=-1) <= 0)):
+            raise ValueError(f"Right breakpoints DR must be positive and increasing, got {DR}.")
+        if DL.shape[-1] and (np.any(DL[..., 0] >= 0) or np.any(np.diff(DL, axis=-1) >= 0)):
+            raise ValueError(f"Left breakpoints DL must be negative and decreasing, got {DL}.")
+        if np.any(np.asarray(self.mR) <= 0):
+            raise ValueError(f"Backlash slope mR must be positive, got {np.asarray(self.mR)}.")
+        if np.any(np.asarray(self.cL) < 0) or np.any(np.asarray(self.cR) < 0):
+            raise ValueError(
+                f"Backlash gaps must be non-negative, got cL={np.asarray(self.cL)}, "
+                f"cR={np.asarray(self.cR)}."
+            )
+
+    def _arrays(self):
+        return (self.MR, self.DR, self.ML, self.DL, self.a, self.b, self.cL, self.mR, self.cR)
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return self.orders.names
+
+    # ---- conversions -------------------------------------------------------------------
+
+    def to_vector(self) -> Float[Array, "... P"]:
+        """Parameters in `names` order (with `cR`, not the paper's `C`)."""
+        arrays = self._arrays()
+        batch = jnp.shape(self.mR)
+        return jnp.concatenate([jnp.reshape(a, batch + (-1,)) for a in arrays], axis=-1)
+
+    def to_theta(self) -> Float[Array, "... P"]:
+        """The paper's theta (eq. 18): like `to_vector` but ending in `C = cR mR`."""
+        vector = self.to_vector()
+        return vector.at[..., -1].set(self.cR * self.mR)
+
+    @classmethod
+    def from_vector(
+        cls, vector: Float[Array, "... P"], orders: Orders, *, check: bool = True
+    ) -> CascadeParams:
+        """Inverse of `to_vector`.
+
+        `check=False` skips the invariant checks: estimators use it to hold iterates that
+        may be inadmissible, which they then report through a status, not an exception.
+        """
+        o = orders
+        sizes = [o.nR, o.nR - 1, o.nL, o.nL - 1, o.r - 1, o.p]
+        if jnp.shape(vector)[-1] != o.size:
+            raise ValueError(
+                f"Parameter vector must have {o.size} entries for orders {o}, "
+                f"got {jnp.shape(vector)[-1]}."
+            )
+        parts, start = [], 0
+        for size in sizes:
+            parts.append(vector[..., start : start + size])
+            start += size
+        parts += [vector[..., start], vector[..., start + 1], vector[..., start + 2]]
+        if check:
+            return cls(*parts, o)
+        self = object.__new__(cls)  # what equinox itself does when unflattening
+        for field, value in zip(_ARRAY_FIELDS, parts, strict=True):
+            object.__setattr__(self, field, value)
+        object.__setattr__(self, "orders", o)
+        return self
+
+    @classmethod
+    def from_theta(
+        cls, theta: Float[Array, "... P"], orders: Orders, *, check: bool = True
+    ) -> CascadeParams:
+        """Inverse of `to_theta`: recovers `cR = C / mR`."""
+        vector = theta.at[..., -1].set(theta[..., -1] / theta[..., -2])
+        return cls.from_vector(vector, orders, check=check)
+
+    @classmethod
+    def from_dict(cls, values: Mapping[str, float], orders: Orders | None = None) -> CascadeParams:
+        """Build from `{name: value}`; orders are inferred from the names when not given."""
+        if orders is None:
+            orders = _infer_orders(values)
+        missing = [name for name in orders.names if name not in values]
+        extra = [name for name in values if name not in orders.names]
+        if missing or extra:
+            raise ValueError(
+                f"Parameters for orders {orders} need exactly {list(orders.names)}; "
+                f"missing {missing}, unexpected {extra}."
+            )
+        vector = np.array([float(values[name]) for name in orders.names])
+        return cls.from_vector(jnp.asarray(vector), orders)
+
+    def to_dict(self) -> dict[str, float]:
+        """`{name: float}` for one (unbatched) parameter set."""
+        vector = np.asarray(jax.device_get(self.to_vector()), dtype=float)
+        if vector.ndim != 1:
+            raise ValueError("to_dict needs a single parameter set, not a batch.")
+        return dict(zip(self.names, vector.tolist(), strict=True))
+
+    def to_series(self):
+        """A pandas Series indexed by parameter name."""
+        import pandas as pd
+
+        return pd.Series(self.to_dict(), name="value")
+
+    def astype(self, dtype) -> CascadeParams:
+        return CascadeParams.from_vector(self.to_vector().astype(dtype), self.orders, check=False)
+
+
+def _infer_orders(values: Mapping[str, float]) -> Orders:
+    def count(prefix):
+        return sum(
+            1 for name in values if name.startswith(prefix) and name[len(prefix) :].isdigit()
+        )
+
+    nR, nL = count("MR"), count("ML")
+    r = count("a") + 1
+    p = count("b")
+    return Orders(nR=max(nR, 1), nL=max(nL, 1), r=r, p=p)
+
+
+def is_stable(b: Float[Array, " p"]) -> Array:
+    """Whether `1 + b1 q^-1 + ... + bp q^-p` has all roots inside the unit circle.
+
+    Schur-Cohn step-down recursion (reflection coefficients), traceable and cheap for the
+    small orders used here.
+    """
+    p = b.shape[-1]
+    stable = jnp.asarray(True)
+    poly = jnp.concatenate([jnp.ones((1,), b.dtype), b])
+    for m in range(p, 0, -1):
+        k = poly[m]
+        stable = stable & (jnp.abs(k) < 1)
+        denom = jnp.where(jnp.abs(k) < 1, 1 - k**2, 1.0)
+        poly = (poly[:m] - k * poly[m:0:-1]) / denom
+    return stable
+
+
+def is_admissible(params: CascadeParams, u_min, u_max) -> Array:
+    """Whether the estimates describe a usable model for an input in `[u_min, u_max]`.
+
+    Breakpoints sorted and inside the input range (a segment never visited leaves its
+    slope unidentifiable), `mR > 0` (eq. 11 divides by it), a stable linear block, and
+    every value finite. Traceable; returns a boolean scalar.
+    """
+    checks = [jnp.all(jnp.isfinite(params.to_vector())), params.mR > 0, is_stable(params.b)]
+    if params.orders.nR > 1:
+        checks += [params.DR[0] > 0, jnp.all(jnp.diff(params.DR) > 0), params.DR[-1] < u_max]
+    if params.orders.nL > 1:
+        checks += [params.DL[0] < 0, jnp.all(jnp.diff(params.DL) < 0), params.DL[-1] > u_min]
+    return jnp.all(jnp.stack([jnp.asarray(c) for c in checks]))

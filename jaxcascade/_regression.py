@@ -1,0 +1,115 @@
+"""Key-term separated regression of the cascade (Vörös 2016, eqs. 15-18 and 23-25)."""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax.numpy as jnp
+from jaxtyping import Array, Float
+
+from ._model import CascadeParams, Orders
+from ._simulate import backlash_switches, heaviside, shift
+
+
+class Regression(NamedTuple):
+    """Data of one least-squares step: `yc = phi @ theta + e` (eq. 16).
+
+    - `phi`: `Float[Array, "T P"]`, regressors in theta order (eq. 17).
+    - `yc`: `Float[Array, " T"]`, the corrected output (eq. 25).
+    - `g1`, `g2`: `Float[Array, " T"]`, the switching variables used (eqs. 23-24).
+    """
+
+    phi: Array
+    yc: Array
+    g1: Array
+    g2: Array
+
+
+def block_columns(orders: Orders) -> tuple[slice, slice]:
+    """Column ranges of theta: (NS and LD parameters, backlash parameters cL, mR, C)."""
+    return slice(0, orders.size - 3), slice(orders.size - 3, orders.size)
+
+
+def regression(
+    params: CascadeParams,
+    u: Float[Array, " T"],
+    y: Float[Array, " T"],
+    v: Float[Array, " T"],
+    x: Float[Array, " T"],
+    *,
+    unit_slopes: bool = False,
+) -> Regression:
+    """Regressors and corrected output for the current estimates.
+
+    **Arguments:**
+
+    - `params`: the s-th estimates; they set the breakpoints and slopes inside the
+      switching functions f1, f2 (eqs. 19-20) and the backlash parameters in g1, g2.
+    - `u`, `y`: measured input and output (`y` may be noisy: it enters g1, g2 and yc).
+    - `v`, `x`: estimates of the internal signals (eqs. 21-22), or `u`, `y` in the
+      paper's first iteration.
+    - `unit_slopes`: use M = 1 inside f1, f2. With the paper's all-zero initial slopes
+      the breakpoint regressors `-f` vanish identically; with unit slopes the breakpoint
+      column's coefficient is `D * M` instead of `D` (see `estimate`).
+    """
+    o = params.orders
+    dtype = u.dtype
+    y_prev = shift(y, 1)
+    g1, g2 = backlash_switches(
+        x, y_prev, params.cL.astype(dtype), params.mR.astype(dtype), params.cR.astype(dtype)
+    )
+    yc = y - y_prev * (1 - g1) * (1 - g2)
+    u1 = shift(u, 1)
+    zero = jnp.zeros((1,), dtype)
+    DR = jnp.concatenate([zero, params.DR.astype(dtype)])
+    DL = jnp.concatenate([zero, params.DL.astype(dtype)])
+    MR = jnp.ones_like(params.MR) if unit_slopes else params.MR.astype(dtype)
+    ML = jnp.ones_like(params.ML) if unit_slopes else params.ML.astype(dtype)
+
+    right = heaviside(DR[:, None] - u1[None, :])  # h(DR_{i-1} - u(t-1)), i = 1..nR
+    left = heaviside(u1[None, :] - DL[:, None])  # h(u(t-1) - DL_{j-1}), j = 1..nL
+    columns = [
+        right * u1,
+        -MR[1:, None] * right[1:],  # -f1,i+1(t-1): coefficient DR_i
+        left * u1,
+        -ML[1:, None] * left[1:],  # -f2,j+1(t-1): coefficient DL_j
+        jnp.stack([shift(v, i) for i in range(2, o.r + 1)]) if o.r > 1 else None,
+        jnp.stack([-shift(x, j) for j in range(1, o.p + 1)]) if o.p > 0 else None,
+    ]
+    columns = [c for c in columns if c is not None]
+    ns_ld = jnp.concatenate(columns, axis=0) * g1[None, :]
+    backlash = jnp.stack([g1, x * g2, -g2])
+    phi = jnp.concatenate([ns_ld, backlash], axis=0).T
+    return Regression(phi, yc, g1, g2)
+
+
+def solve_normal_equations(
+    phi: Float[Array, "T P"], yc: Float[Array, " T"]
+) -> tuple[Float[Array, " P"], Array, Float[Array, ""]]:
+    """Least squares `argmin |yc - phi theta|^2` through the normal equations (eq. 28).
+
+    Columns are scaled to unit norm before the solve; the problem is reported singular
+    when a column is identically zero (a regime or segment never active) or the scaled
+    Gram matrix has condition number above ~1/(1e4 eps). Never raises.
+
+    **Returns:** `(theta, singular, cost)` with `cost = mean(residual^2)` (eq. 28).
+    """
+    gram = phi.T @ phi
+    rhs = phi.T @ yc
+    theta, singular = solve_gram(gram, rhs)
+    cost = jnp.mean((yc - phi @ theta) ** 2)
+    return theta, singular, cost
+
+
+def solve_gram(gram, rhs):
+    """Solve `gram @ theta = rhs` with Jacobi scaling and a singularity flag."""
+    eps = jnp.finfo(gram.dtype).eps
+    d = jnp.sqrt(jnp.diagonal(gram))
+    zero = d <= jnp.max(d) * eps
+    d = jnp.where(zero, 1.0, d)
+    scaled = gram / (d[:, None] * d[None, :])
+    eigenvalues = jnp.linalg.eigvalsh(scaled)
+    singular = jnp.any(zero) | (eigenvalues[0] <= eigenvalues[-1] * 1e4 * eps)
+    safe = jnp.where(singular, jnp.eye(gram.shape[0], dtype=gram.dtype), scaled)
+    theta = jnp.linalg.solve(safe, rhs / d) / d
+    return jnp.where(singular, jnp.zeros_like(theta), theta), singular

@@ -1,0 +1,123 @@
+"""Simulation of the cascade: piecewise-linear NS, linear LD, backlash ND (eqs. 1-11)."""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Float, PRNGKeyArray
+
+from ._model import CascadeParams
+
+
+def heaviside(s):
+    """The paper's switching function (eq. 4): 1 where `s < 0`, else 0."""
+    return (s < 0).astype(s.dtype)
+
+
+def shift(signal: Float[Array, " T"], lag: int) -> Float[Array, " T"]:
+    """`signal(t - lag)` with zeros before the record starts (`u = y = 0` for `t <= 0`)."""
+    if lag == 0:
+        return signal
+    return jnp.concatenate([jnp.zeros((lag,), signal.dtype), signal[:-lag]])
+
+
+def pwl(params: CascadeParams, u: Float[Array, " T"]) -> Float[Array, " T"]:
+    """Static piecewise-linear block NS (eq. 1)."""
+    zero = jnp.zeros((1,), u.dtype)
+    DR = jnp.concatenate([zero, params.DR.astype(u.dtype)])
+    DL = jnp.concatenate([zero, params.DL.astype(u.dtype)])
+    right = heaviside(DR[:, None] - u[None, :]) * (u[None, :] - DR[:, None])
+    left = heaviside(u[None, :] - DL[:, None]) * (u[None, :] - DL[:, None])
+    return params.MR.astype(u.dtype) @ right + params.ML.astype(u.dtype) @ left
+
+
+def linear_block(params: CascadeParams, v: Float[Array, " T"]) -> Float[Array, " T"]:
+    """Linear dynamic block LD (eq. 6, with a1 = 1), as a `lax.scan` over the poles."""
+    a = jnp.concatenate([jnp.ones((1,), v.dtype), params.a.astype(v.dtype)])
+    w = sum(a[i - 1] * shift(v, i) for i in range(1, params.orders.r + 1))
+    p = params.orders.p
+    if p == 0:
+        return w
+    b = params.b.astype(v.dtype)
+
+    def step(past, w_t):
+        x_t = w_t - jnp.dot(b, past)
+        return jnp.concatenate([x_t[None], past[:-1]]), x_t
+
+    _, x = jax.lax.scan(step, jnp.zeros((p,), v.dtype), w)
+    return x
+
+
+def backlash_switches(x, y_prev, cL, mR, cR) -> tuple[Array, Array]:
+    """Switching variables g1 (left line active) and g2 (right line active), eqs. 10-11 with mL = 1.
+
+    The two lines cross when `mR != 1`; where both conditions hold the left line wins
+    (g2 is cleared). The simulator and the regression share this rule, so the true
+    parameters stay an exact fixed point of the estimator.
+    """
+    g1 = heaviside(x + cL - y_prev)
+    g2 = heaviside((y_prev - mR * x + mR * cR) / mR) * (1 - g1)
+    return g1, g2
+
+
+def backlash(params: CascadeParams, x: Float[Array, " T"]) -> Float[Array, " T"]:
+    """Backlash ND (eq. 9) as a `lax.scan`; its state starts at y = 0."""
+    cL, mR, cR = (jnp.asarray(c, x.dtype) for c in (params.cL, params.mR, params.cR))
+
+    def step(y_prev, x_t):
+        g1, g2 = backlash_switches(x_t, y_prev, cL, mR, cR)
+        y_t = g1 * (x_t + cL) + g2 * mR * (x_t - cR) + (1 - g1) * (1 - g2) * y_prev
+        return y_t, y_t
+
+    _, y = jax.lax.scan(step, jnp.zeros((), x.dtype), x)
+    return y
+
+
+class Signals(NamedTuple):
+    """Internal and output signals of one simulated record, each `Float[Array, " T"]`."""
+
+    v: Array
+    x: Array
+    y: Array
+
+
+def signals(params: CascadeParams, u: Float[Array, " T"]) -> Signals:
+    """Noise-free simulation returning v, x and y."""
+    v = pwl(params, u)
+    x = linear_block(params, v)
+    return Signals(v, x, backlash(params, x))
+
+
+@jax.jit
+def simulate(params: CascadeParams, u: Float[Array, " T"]) -> Float[Array, " T"]:
+    """Noise-free output y of the cascade for input u (dtype follows u)."""
+    return signals(params, u).y
+
+
+def add_noise(
+    key: PRNGKeyArray, y: Float[Array, " T"], snr: float | Float[Array, ""]
+) -> Float[Array, " T"]:
+    """Add white Gaussian noise at the paper's SNR = sqrt(var(y) / var(e)) (an amplitude ratio).
+
+    `snr = inf` adds nothing. The backlash state is not affected: noise is measurement noise.
+    """
+    snr = jnp.asarray(snr, y.dtype)
+    sigma = jnp.std(y) / snr
+    return y + sigma * jax.random.normal(key, y.shape, y.dtype)
+
+
+def uniform_input(key: PRNGKeyArray, n: int, amplitude: float = 2.0, dtype=None):
+    """Input uniformly distributed in (-amplitude, amplitude), as in the paper's examples."""
+    dtype = dtype or jnp.result_type(float)
+    return jax.random.uniform(key, (n,), dtype, -amplitude, amplitude)
+
+
+@jax.jit
+def measure(
+    key: PRNGKeyArray, params: CascadeParams, u: Float[Array, " T"], snr
+) -> tuple[Float[Array, " T"], Float[Array, " T"]]:
+    """Simulate and add output noise; returns `(y_measured, y_noise_free)`."""
+    y = simulate(params, u)
+    return add_noise(key, y, snr), y
