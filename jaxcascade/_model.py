@@ -77,9 +77,9 @@ def _is_concrete(*values) -> bool:
 class CascadeParams(eqx.Module):
     """Parameters of the cascade, normalised by `mL = 1` and `a1 = 1` (eq. 12).
 
-    NS (eq. 1): `v = sum_i MR_i h(DR_{i-1} - u)(u - DR_{i-1}) + sum_j ML_j h(u - DL_{j-1})(u - DL_{j-1})`
-    with `DR_0 = DL_0 = 0`; slopes are increments, the slope of right segment k is
-    `MR_1 + ... + MR_k`.
+    NS (eq. 1): `v = sum_i MR_i h(DR_{i-1} - u)(u - DR_{i-1})
+    + sum_j ML_j h(u - DL_{j-1})(u - DL_{j-1})` with `DR_0 = DL_0 = 0`; slopes are
+    increments, the slope of right segment k is `MR_1 + ... + MR_k`.
     LD (eq. 6): `x(t) = v(t-1) + sum_{i>=2} a_i v(t-i) - sum_j b_j x(t-j)`.
     ND (eq. 9): backlash with slopes `mL = 1`, `mR` and gaps `cL`, `cR`.
 
