@@ -1,0 +1,1 @@
+"""`jaxcascade reproduce`: the paper's examples (placeholder until the figures land)."""
