@@ -56,7 +56,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"jaxcascade: error: {message}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print("jaxcascade: interrupted; completed chunks are kept, rerun to resume.", file=sys.stderr)
+        print(
+            "jaxcascade: interrupted; completed chunks are kept, rerun to resume.", file=sys.stderr
+        )
         return 130
 
 
