@@ -1,0 +1,1 @@
+"""Estimator variants beyond the paper's literal iteration (`jaxcascade._estimate`)."""

@@ -1,0 +1,177 @@
+"""Output-error refinement: least squares on the simulation error with optimistix.
+
+The simulation error `simulate(params, u) - y` is minimised over all parameters by
+Levenberg-Marquardt. Parameters are mapped to an unconstrained vector `z` so that every
+iterate is admissible by construction: breakpoints stay sorted inside the input range,
+`mR > 0`, gaps >= 0 and the linear block stays stable (it is parameterised by its
+reflection coefficients). JAX differentiates through the `lax.scan` recursions; the
+backlash makes the error piecewise smooth, which is why several starts are used.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import optimistix as optx
+from jaxtyping import Array, Float
+
+from ._model import CascadeParams, Orders
+from ._simulate import signals
+from ._status import Status
+
+_REFLECTION_LIMIT = 0.999
+
+
+def _slices(orders: Orders):
+    o, start, out = orders, 0, {}
+    for name, size in (
+        ("MR", o.nR),
+        ("DR", o.nR - 1),
+        ("ML", o.nL),
+        ("DL", o.nL - 1),
+        ("a", o.r - 1),
+        ("b", o.p),
+        ("cL", 1),
+        ("mR", 1),
+        ("cR", 1),
+    ):
+        out[name] = slice(start, start + size)
+        start += size
+    return out
+
+
+def _step_up(k):
+    poly = jnp.ones((1,), k.dtype)
+    for m in range(k.shape[0]):
+        padded = jnp.concatenate([poly, jnp.zeros((1,), k.dtype)])
+        poly = padded + k[m] * padded[::-1]
+    return poly[1:]
+
+
+def _step_down(b):
+    p = b.shape[0]
+    poly = jnp.concatenate([jnp.ones((1,), b.dtype), b])
+    ks = []
+    for m in range(p, 0, -1):
+        k = poly[m]
+        ks.append(k)
+        poly = (poly[:m] - k * poly[m:0:-1]) / (1 - k**2)
+    return jnp.stack(ks[::-1]) if ks else jnp.zeros((0,), b.dtype)
+
+
+def _breakpoints(z, bound):
+    fractions = jax.nn.softmax(jnp.concatenate([z, jnp.zeros((1,), z.dtype)]))
+    return bound * jnp.cumsum(fractions)[:-1]
+
+
+def _breakpoints_inverse(D, bound):
+    fractions = jnp.diff(jnp.concatenate([jnp.zeros((1,)), D / bound, jnp.ones((1,))]))
+    fractions = jnp.clip(fractions, 1e-6, None)
+    return jnp.log(fractions[:-1]) - jnp.log(fractions[-1])
+
+
+def _softplus_inverse(c):
+    c = jnp.clip(c, 1e-8, None)
+    return c + jnp.log(-jnp.expm1(-c))
+
+
+def from_unconstrained(z: Float[Array, " P"], orders: Orders, u_min, u_max) -> CascadeParams:
+    """Map an unconstrained vector to admissible parameters (see module docstring)."""
+    s = _slices(orders)
+    b = _step_up(_REFLECTION_LIMIT * jnp.tanh(z[s["b"]])) if orders.p else z[s["b"]]
+    vector = jnp.concatenate(
+        [
+            z[s["MR"]],
+            _breakpoints(z[s["DR"]], u_max),
+            z[s["ML"]],
+            _breakpoints(z[s["DL"]], u_min),
+            z[s["a"]],
+            b,
+            jax.nn.softplus(z[s["cL"]]),
+            jnp.exp(z[s["mR"]]),
+            jax.nn.softplus(z[s["cR"]]),
+        ]
+    )
+    return CascadeParams.from_vector(vector, orders, check=False)
+
+
+def to_unconstrained(params: CascadeParams, u_min, u_max) -> Float[Array, " P"]:
+    """Inverse of `from_unconstrained`; values on or past a bound are pulled just inside."""
+    o = params.orders
+    dtype = params.mR.dtype
+    k = _step_down(params.b) if o.p else params.b
+    k = jnp.clip(k / _REFLECTION_LIMIT, -1 + 1e-6, 1 - 1e-6)
+    z = jnp.concatenate(
+        [
+            params.MR,
+            _breakpoints_inverse(params.DR, u_max).astype(dtype),
+            params.ML,
+            _breakpoints_inverse(params.DL, u_min).astype(dtype),
+            params.a,
+            jnp.arctanh(k),
+            _softplus_inverse(params.cL)[None],
+            jnp.log(jnp.clip(params.mR, 1e-8, None))[None],
+            _softplus_inverse(params.cR)[None],
+        ]
+    )
+    return jnp.where(jnp.isfinite(z), z, 0.0)
+
+
+def simulation_error(params: CascadeParams, u, y) -> Float[Array, " T"]:
+    return signals(params, u).y - y
+
+
+class Refined(eqx.Module):
+    """Output of `refine` (batched under `vmap`)."""
+
+    params: CascadeParams
+    cost: Float[Array, ""]  # mean squared simulation error
+    status: Array
+    steps: Array
+
+
+def refine(
+    init: CascadeParams,
+    u: Float[Array, " T"],
+    y: Float[Array, " T"],
+    *,
+    max_steps: int = 100,
+    rtol: float = 1e-8,
+    atol: float = 1e-10,
+) -> Refined:
+    """Levenberg-Marquardt on the simulation error, from `init`. Never raises."""
+    orders = init.orders
+    u_min, u_max = jnp.min(u), jnp.max(u)
+
+    def residual(z, args):
+        u, y = args
+        return simulation_error(from_unconstrained(z, orders, u_min, u_max), u, y)
+
+    z0 = to_unconstrained(init.astype(u.dtype), u_min, u_max)
+    solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
+    solution = optx.least_squares(
+        residual, solver, z0, args=(u, y), max_steps=max_steps, throw=False
+    )
+    params = from_unconstrained(solution.value, orders, u_min, u_max)
+    cost = jnp.mean(residual(solution.value, (u, y)) ** 2)
+    finite = jnp.isfinite(cost) & jnp.all(jnp.isfinite(solution.value))
+    status = jnp.where(
+        ~finite,
+        Status.diverged,
+        jnp.where(
+            solution.result == optx.RESULTS.successful,
+            Status.converged,
+            jnp.where(
+                solution.result == optx.RESULTS.max_steps_reached,
+                Status.max_iterations,
+                Status.failed,
+            ),
+        ),
+    )
+    return Refined(
+        params=params,
+        cost=jnp.where(finite, cost, jnp.inf),
+        status=status.astype(jnp.int32),
+        steps=solution.stats["num_steps"],
+    )
