@@ -32,11 +32,11 @@ def _poly_from_roots(roots):
 
 
 def random_system(
-    key: PRNGKeyArray, orders: Orders = Orders(), u_max: float = 2.0, dtype=None
+    key: PRNGKeyArray, orders: Orders | None = None, u_max: float = 2.0, dtype=None
 ) -> CascadeParams:
     """Draw one cascade from the prior above (traceable, `vmap` over keys)."""
     dtype = dtype or jnp.result_type(float)
-    o = orders
+    o = orders or Orders()
     keys = iter(jax.random.split(key, 16))
 
     def uniform(shape, low, high):
