@@ -15,6 +15,7 @@ import sys
 # Modules that contribute a subcommand, in the order shown by --help.
 _SUBCOMMANDS = [
     "jaxcascade._reproduce",
+    "jaxcascade._montecarlo",
 ]
 
 

@@ -1,0 +1,314 @@
+"""Experiment specification of a Monte-Carlo sweep: a dataclass and its TOML form.
+
+A spec names one system (a paper example or explicit parameters and orders), the input
+distribution, and a grid of sample sizes x SNRs x estimators; each grid cell runs
+`realisations` independent records. Everything is validated at construction, so a bad
+spec fails with one sentence before any work starts.
+
+TOML layout (every key optional except the system):
+
+    example = 1                      # or a [system] table
+    n = [500, 1000, 4000]
+    snr = [10, 25, 50]               # sqrt(var y / var e); inf = noise-free
+    realisations = 500
+    seed = 0
+    estimators = ["literal"]
+    chunk_size = 64
+
+    [input]
+    distribution = "uniform"         # u uniform in (-amplitude, amplitude)
+    amplitude = 2.0
+
+    [system]                         # instead of `example`
+    orders = "2,2,2,2"               # optional, inferred from the names
+    params = { MR1 = 1.2, MR2 = -1.4, DR1 = 1.0, ... }
+
+    [estimator.literal]              # settings passed to the estimator
+    max_iterations = 50
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import pathlib
+import tomllib
+from collections.abc import Mapping
+from typing import Any, NamedTuple
+
+import jax.numpy as jnp
+
+from ._estimators import accepted_settings, estimator
+from ._examples import EXAMPLES
+from ._model import CascadeParams, Orders
+
+INPUT_DISTRIBUTIONS = ("uniform",)
+
+_TOP_LEVEL = (
+    "example",
+    "system",
+    "input",
+    "n",
+    "snr",
+    "realisations",
+    "seed",
+    "estimators",
+    "estimator",
+    "chunk_size",
+)
+
+
+class Cell(NamedTuple):
+    """One grid cell of a sweep: sample size, SNR and estimator name."""
+
+    n: int
+    snr: float
+    estimator: str
+
+
+def _as_tuple(value, kind, name) -> tuple:
+    values = value if isinstance(value, list | tuple) else [value]
+    if not values:
+        raise ValueError(f"Spec field {name!r} needs at least one value.")
+    out = []
+    for v in values:
+        if isinstance(v, bool):
+            raise ValueError(f"Spec field {name!r} must hold numbers, got {v!r}.")
+        try:
+            converted = kind(v)
+        except (TypeError, ValueError):
+            raise ValueError(f"Spec field {name!r} must hold numbers, got {v!r}.") from None
+        if kind is int and converted != v:
+            raise ValueError(f"Spec field {name!r} must hold integers, got {v!r}.")
+        out.append(converted)
+    if len(set(out)) != len(out):
+        raise ValueError(f"Spec field {name!r} repeats a value: {list(values)}.")
+    return tuple(out)
+
+
+def _freeze(value):
+    # Settings are static under jit, so they must be hashable: TOML arrays become tuples.
+    if isinstance(value, list | tuple):
+        return tuple(_freeze(v) for v in value)
+    if isinstance(value, bool | int | float | str):
+        return value
+    raise ValueError(f"Estimator settings must be numbers, strings or arrays, got {value!r}.")
+
+
+@dataclasses.dataclass(frozen=True)
+class Spec:
+    """A Monte-Carlo experiment: one system, a grid `n x snr x estimators`, realisations.
+
+    - `example`: paper example number (1 or 2), or `None` when `params` is given.
+    - `params`: explicit true values `{name: value}`; `orders` (an `Orders` or
+      `"nR,nL,r,p"`) defaults to the orders implied by the names.
+    - `input`, `amplitude`: input distribution, `"uniform"` in `(-amplitude, amplitude)`.
+    - `n`, `snr`: sample sizes and SNRs (`sqrt(var y / var e)`, `inf` = noise-free);
+      default the example's own (N, 25).
+    - `realisations`: records per grid cell; `seed`: the sweep's PRNG seed.
+    - `estimators`: names in `ESTIMATORS`; `settings`: `{name: {setting: value}}`.
+    - `chunk_size`: realisations per jit-compiled batch; it bounds peak memory and
+      never changes a result.
+    """
+
+    example: int | None = None
+    params: Mapping[str, float] | None = None
+    orders: Orders | str | None = None
+    input: str = "uniform"
+    amplitude: float = 2.0
+    n: tuple[int, ...] | None = None
+    snr: tuple[float, ...] | None = None
+    realisations: int = 100
+    seed: int = 0
+    estimators: tuple[str, ...] = ("literal",)
+    settings: Mapping[str, Mapping[str, Any]] = dataclasses.field(default_factory=dict)
+    chunk_size: int = 64
+
+    def __post_init__(self):
+        set_ = object.__setattr__
+        if (self.example is None) == (self.params is None):
+            raise ValueError(
+                "A spec needs exactly one system: an example number or explicit params."
+            )
+        if self.example is not None:
+            if isinstance(self.example, bool) or self.example not in EXAMPLES:
+                raise ValueError(
+                    f"Unknown example {self.example!r}; the paper has examples "
+                    f"{' and '.join(map(str, EXAMPLES))}."
+                )
+            ex = EXAMPLES[self.example]
+            if self.orders is not None:
+                raise ValueError("A spec with an example takes its orders from the example.")
+            set_(self, "orders", ex.orders)
+            set_(self, "n", self.n if self.n is not None else ex.n_samples)
+            set_(self, "snr", self.snr if self.snr is not None else ex.snr)
+        else:
+            if not isinstance(self.params, Mapping):
+                raise ValueError("Spec field 'params' must map parameter names to values.")
+            orders = Orders.parse(self.orders) if isinstance(self.orders, str) else self.orders
+            truth = CascadeParams.from_dict(dict(self.params), orders)  # checks invariants
+            set_(self, "orders", truth.orders)
+            set_(self, "params", truth.to_dict())
+            if self.n is None:
+                raise ValueError("A spec with explicit params needs the sample sizes 'n'.")
+            set_(self, "snr", self.snr if self.snr is not None else 25.0)
+        set_(self, "n", _as_tuple(self.n, int, "n"))
+        set_(self, "snr", _as_tuple(self.snr, float, "snr"))
+        set_(self, "estimators", _as_tuple(self.estimators, str, "estimators"))
+
+        if self.input not in INPUT_DISTRIBUTIONS:
+            raise ValueError(
+                f"Unknown input distribution {self.input!r}; "
+                f"known: {', '.join(INPUT_DISTRIBUTIONS)}."
+            )
+        if not (isinstance(self.amplitude, int | float) and 0 < self.amplitude < math.inf):
+            raise ValueError(
+                f"Input amplitude must be positive and finite, got {self.amplitude!r}."
+            )
+        set_(self, "amplitude", float(self.amplitude))
+        low = self.orders.min_samples
+        for n in self.n:
+            if n < low:
+                raise ValueError(
+                    f"N = {n} is too small for orders {self.orders}: the regression needs "
+                    f"at least {low} samples."
+                )
+        for snr in self.snr:
+            if not snr > 0:
+                raise ValueError(f"SNR must be positive (inf = noise-free), got {snr}.")
+        for name, value, lowest in (
+            ("realisations", self.realisations, 1),
+            ("chunk_size", self.chunk_size, 1),
+            ("seed", self.seed, 0),
+        ):
+            if isinstance(value, bool) or not isinstance(value, int) or value < lowest:
+                raise ValueError(
+                    f"Spec field {name!r} must be an integer >= {lowest}, got {value!r}."
+                )
+        if self.seed >= 2**32:
+            raise ValueError(f"Seed must be below 2**32, got {self.seed}.")
+
+        for name in self.estimators:
+            estimator(name)
+        if not isinstance(self.settings, Mapping):
+            raise ValueError("Spec field 'settings' must map estimator names to tables.")
+        settings = {}
+        for name, table in self.settings.items():
+            if name not in self.estimators:
+                raise ValueError(
+                    f"Settings given for estimator {name!r}, which the spec does not run."
+                )
+            if not isinstance(table, Mapping):
+                raise ValueError(f"Settings of estimator {name!r} must be a table.")
+            known, any_keyword = accepted_settings(name)
+            unknown = sorted(set(table) - known) if not any_keyword else []
+            if unknown:
+                raise ValueError(
+                    f"Unknown setting {unknown[0]!r} for estimator {name!r}; "
+                    f"known settings: {', '.join(sorted(known))}."
+                )
+            settings[name] = {key: _freeze(value) for key, value in sorted(table.items())}
+        set_(self, "settings", settings)
+
+    # ---- derived ---------------------------------------------------------------------
+
+    @property
+    def system(self) -> str:
+        """Label of the system in tables: `example1`, `example2` or `custom`."""
+        return f"example{self.example}" if self.example is not None else "custom"
+
+    def truth(self, dtype=None) -> CascadeParams:
+        """The true parameters."""
+        dtype = dtype or jnp.result_type(float)
+        if self.example is not None:
+            return EXAMPLES[self.example].params(dtype)
+        return CascadeParams.from_dict(self.params, self.orders).astype(dtype)
+
+    def true_values(self) -> dict[str, float]:
+        values = EXAMPLES[self.example].values if self.example is not None else self.params
+        return {name: float(values[name]) for name in self.orders.names}
+
+    def cells(self) -> list[Cell]:
+        """Grid cells in table order: N outermost, then SNR, then estimator."""
+        return [Cell(n, snr, e) for n in self.n for snr in self.snr for e in self.estimators]
+
+    def estimator_settings(self, name: str) -> tuple[tuple[str, Any], ...]:
+        """Settings of estimator `name`, as a hashable sorted tuple of pairs."""
+        return tuple(sorted(self.settings.get(name, {}).items()))
+
+    # ---- (de)serialisation -----------------------------------------------------------
+
+    def to_dict(self, *, chunk_size: bool = True) -> dict:
+        """The spec in its TOML layout (JSON-serialisable; `from_dict` inverts it)."""
+        out: dict[str, Any] = {}
+        if self.example is not None:
+            out["example"] = self.example
+        else:
+            out["system"] = {"orders": str(self.orders), "params": dict(self.params)}
+        out["input"] = {"distribution": self.input, "amplitude": self.amplitude}
+        out["n"] = list(self.n)
+        out["snr"] = list(self.snr)
+        out["realisations"] = self.realisations
+        out["seed"] = self.seed
+        out["estimators"] = list(self.estimators)
+        if self.settings:
+            out["estimator"] = {
+                name: {k: list(v) if isinstance(v, tuple) else v for k, v in table.items()}
+                for name, table in self.settings.items()
+            }
+        if chunk_size:
+            out["chunk_size"] = self.chunk_size
+        return out
+
+    def to_json(self, *, chunk_size: bool = True) -> str:
+        return json.dumps(self.to_dict(chunk_size=chunk_size), sort_keys=True)
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> Spec:
+        """Build from the TOML layout; unknown fields are an error."""
+        unknown = [key for key in data if key not in _TOP_LEVEL]
+        if unknown:
+            raise ValueError(
+                f"Unknown spec field {unknown[0]!r}; known fields: {', '.join(_TOP_LEVEL)}."
+            )
+        kwargs: dict[str, Any] = {}
+        for key in ("example", "n", "snr", "realisations", "seed", "estimators", "chunk_size"):
+            if key in data:
+                kwargs[key] = data[key]
+        if "system" in data:
+            system = _table(data["system"], "system", ("params", "orders"))
+            if "params" not in system:
+                raise ValueError("Spec table [system] needs 'params'.")
+            kwargs["params"] = system["params"]
+            kwargs["orders"] = system.get("orders")
+        if "input" in data:
+            table = _table(data["input"], "input", ("distribution", "amplitude"))
+            kwargs["input"] = table.get("distribution", "uniform")
+            kwargs["amplitude"] = table.get("amplitude", 2.0)
+        if "estimator" in data:
+            kwargs["settings"] = _table(data["estimator"], "estimator", None)
+        return cls(**kwargs)
+
+    @classmethod
+    def load(cls, path) -> Spec:
+        """Read and validate a TOML spec file."""
+        path = pathlib.Path(path)
+        try:
+            with path.open("rb") as file:
+                data = tomllib.load(file)
+        except tomllib.TOMLDecodeError as error:
+            raise ValueError(f"Spec file '{path}' is not valid TOML: {error}.") from None
+        return cls.from_dict(data)
+
+
+def _table(value, name, allowed) -> dict:
+    if not isinstance(value, Mapping):
+        raise ValueError(f"Spec field {name!r} must be a table.")
+    if allowed is not None:
+        unknown = [key for key in value if key not in allowed]
+        if unknown:
+            raise ValueError(
+                f"Unknown field {unknown[0]!r} in [{name}]; known fields: {', '.join(allowed)}."
+            )
+    return dict(value)

@@ -1,0 +1,244 @@
+"""Result tables of Monte-Carlo sweeps (pandas): per realisation, per cell, comparisons.
+
+**Realisation table**: one row per realisation with the spec fields (`system`,
+`orders`, `input`, `amplitude`, `n`, `snr`, `estimator`, `seed`), `realisation` (its
+index in the cell) and `key` (its PRNG key data as one uint64, enough to rerun it),
+`status` (a `Status` name), `iterations`, `cost` (the estimator's final cost),
+`nrmse` (validation NRMSE on a fresh record; `inf` for an inadmissible estimate),
+`admissible`, `recovered` (status converged and every parameter within `TOLERANCE`
+of the truth), one column per parameter with the estimate, and `true_<name>` with the
+true value.
+
+**Summary**: one row per grid cell and parameter. The estimate statistics (mean,
+bias, std, RMSE) use only the realisations whose estimate is finite and admissible
+(`used` says how many of `count`): an inadmissible estimate is not a model, and one
+blown-up realisation would otherwise swamp every moment. Failures are not hidden:
+`count_<status>` counts every status, and the two rates use all realisations:
+`converged_rate` (status converged) and `recovered_rate` (converged and within
+`TOLERANCE`). Each statistic has its Monte-Carlo standard error (`*_se`):
+mean and bias `s / sqrt(m)`; std `s / sqrt(2 (m - 1))` (normal approximation);
+RMSE by the delta method, `sd(e^2) / (2 RMSE sqrt(m))`; rates `sqrt(p (1 - p) / count)`.
+"""
+
+from __future__ import annotations
+
+import json
+import pathlib
+import sys
+
+import numpy as np
+import pandas as pd
+
+from ._status import Status
+
+CELL_COLUMNS = ["system", "n", "snr", "estimator"]
+TOLERANCE = 0.05
+_METADATA_KEY = b"jaxcascade"
+
+
+def true_column(name: str) -> str:
+    return f"true_{name}"
+
+
+def parameter_names(table: pd.DataFrame) -> list[str]:
+    """Parameter names of a realisation table, in column order."""
+    prefix = true_column("")
+    return [c[len(prefix) :] for c in table.columns if c.startswith(prefix)]
+
+
+def realisation_frame(spec, cell, indices, outputs: dict) -> pd.DataFrame:
+    """Rows of one chunk from the host arrays returned by the batched run."""
+    from ._status import status_names
+
+    names = spec.orders.names
+    truth = spec.true_values()
+    estimates = np.asarray(outputs["estimate"], dtype=np.float64)
+    count = len(indices)
+    errors = np.abs(estimates - np.array([truth[name] for name in names]))
+    status = np.asarray(outputs["status"])
+    columns = {
+        "system": [spec.system] * count,
+        "orders": [str(spec.orders)] * count,
+        "input": [spec.input] * count,
+        "amplitude": np.full(count, spec.amplitude),
+        "n": np.full(count, cell.n, dtype=np.int64),
+        "snr": np.full(count, cell.snr, dtype=np.float64),
+        "estimator": [cell.estimator] * count,
+        "seed": np.full(count, spec.seed, dtype=np.int64),
+        "realisation": np.asarray(indices, dtype=np.int64),
+        "key": np.asarray(outputs["key"], dtype=np.uint64),
+        "status": status_names(status).astype(str),
+        "iterations": np.asarray(outputs["iterations"], dtype=np.int64),
+        "cost": np.asarray(outputs["cost"], dtype=np.float64),
+        "nrmse": np.asarray(outputs["nrmse"], dtype=np.float64),
+        "admissible": np.asarray(outputs["admissible"], dtype=bool),
+        "recovered": (status == Status.converged) & np.all(errors <= TOLERANCE, axis=1),
+    }
+    for j, name in enumerate(names):
+        columns[name] = estimates[:, j]
+    for name in names:
+        columns[true_column(name)] = np.full(count, truth[name])
+    return pd.DataFrame(columns)
+
+
+# ---- summaries -------------------------------------------------------------------------
+
+
+def _rate(hits: np.ndarray) -> tuple[float, float]:
+    n = len(hits)
+    p = float(np.mean(hits)) if n else float("nan")
+    return p, float(np.sqrt(p * (1 - p) / n)) if n else float("nan")
+
+
+def summarise(table: pd.DataFrame) -> pd.DataFrame:
+    """Per grid cell and parameter: mean, bias, std, RMSE, rates, each with its MC error."""
+    names = parameter_names(table)
+    rows = []
+    for cell, group in table.groupby(CELL_COLUMNS, sort=False, dropna=False):
+        count = len(group)
+        used = group[group["admissible"].to_numpy(bool)]
+        m = len(used)
+        status = group["status"].to_numpy(str)
+        converged, converged_se = _rate(status == Status.converged.name)
+        recovered, recovered_se = _rate(group["recovered"].to_numpy(bool))
+        per_cell = {
+            "count": count,
+            "used": m,
+            "converged_rate": converged,
+            "converged_rate_se": converged_se,
+            "recovered_rate": recovered,
+            "recovered_rate_se": recovered_se,
+            "nrmse_median": float(np.median(group["nrmse"])) if count else float("nan"),
+            **{f"count_{s.name}": int(np.sum(status == s.name)) for s in Status},
+        }
+        for name in names:
+            true = float(group[true_column(name)].iloc[0])
+            estimate = used[name].to_numpy(np.float64)
+            error = estimate - true
+            mean = float(np.mean(estimate)) if m else float("nan")
+            std = float(np.std(estimate, ddof=1)) if m > 1 else float("nan")
+            rmse = float(np.sqrt(np.mean(error**2))) if m else float("nan")
+            if m > 1 and rmse > 0:
+                rmse_se = float(np.std(error**2, ddof=1) / np.sqrt(m) / (2 * rmse))
+            else:
+                rmse_se = 0.0 if m > 1 else float("nan")
+            mean_se = std / np.sqrt(m) if m > 1 else float("nan")
+            rows.append(
+                {
+                    **dict(zip(CELL_COLUMNS, cell, strict=True)),
+                    "parameter": name,
+                    "true": true,
+                    "mean": mean,
+                    "mean_se": mean_se,
+                    "bias": mean - true,
+                    "bias_se": mean_se,
+                    "std": std,
+                    "std_se": std / np.sqrt(2 * (m - 1)) if m > 1 else float("nan"),
+                    "rmse": rmse,
+                    "rmse_se": rmse_se,
+                    **per_cell,
+                }
+            )
+    return pd.DataFrame(rows)
+
+
+def read_summary(path) -> pd.DataFrame:
+    """A stored summary (CSV or Parquet); a realisation table is summarised first."""
+    path = pathlib.Path(path)
+    if not path.exists():
+        raise ValueError(f"Baseline '{path}' does not exist.")
+    frame = pd.read_csv(path) if path.suffix == ".csv" else pd.read_parquet(path)
+    if "realisation" in frame.columns:
+        return summarise(frame)
+    missing = [
+        c
+        for c in [*CELL_COLUMNS, "parameter", "bias", "bias_se", "std", "std_se"]
+        if c not in frame
+    ]
+    if missing:
+        raise ValueError(f"'{path}' is not a sweep summary: it lacks column {missing[0]!r}.")
+    return frame
+
+
+def compare(summary: pd.DataFrame, baseline: pd.DataFrame, threshold: float = 3.0) -> pd.DataFrame:
+    """Bias and std of every shared cell and parameter, against a baseline summary.
+
+    A statistic is `flagged` when `|now - baseline| > threshold * sqrt(se_now^2 + se_base^2)`,
+    i.e. when the change is more than Monte-Carlo error explains (about 3 in 1000 rows at
+    `threshold = 3` if nothing changed). Raises ValueError when no cell is shared.
+    """
+    keys = [*CELL_COLUMNS, "parameter"]
+    left = summary.copy()
+    right = baseline.copy()
+    for frame in (left, right):
+        frame["n"] = frame["n"].astype(np.int64)
+        frame["snr"] = frame["snr"].astype(np.float64)
+        for column in ("system", "estimator", "parameter"):
+            frame[column] = frame[column].astype(str)
+    merged = left.merge(right, on=keys, suffixes=("", "_baseline"))
+    if merged.empty:
+        raise ValueError("The baseline shares no grid cell and parameter with this run.")
+    rows = []
+    for statistic in ("bias", "std"):
+        now, base = merged[statistic], merged[f"{statistic}_baseline"]
+        se = np.sqrt(merged[f"{statistic}_se"] ** 2 + merged[f"{statistic}_se_baseline"] ** 2)
+        diff = now - base
+        with np.errstate(divide="ignore", invalid="ignore"):
+            z = np.where(se > 0, np.abs(diff) / se, np.where(diff == 0, 0.0, np.inf))
+        z = np.where(np.isnan(diff), np.where(now.isna() & base.isna(), 0.0, np.inf), z)
+        rows.append(
+            merged[keys].assign(
+                statistic=statistic,
+                value=now,
+                baseline=base,
+                diff=diff,
+                se=se,
+                z=z,
+                flagged=z > threshold,
+            )
+        )
+    return pd.concat(rows, ignore_index=True)
+
+
+# ---- Parquet with metadata -------------------------------------------------------------
+
+
+def run_metadata(spec, dtype, command: list[str] | None = None) -> dict:
+    """Versions, dtype, spec and command line, stored in the Parquet schema metadata."""
+    import jax
+
+    from . import __version__
+
+    return {
+        "jaxcascade": __version__,
+        "jax": jax.__version__,
+        "numpy": np.__version__,
+        "pandas": pd.__version__,
+        "python": sys.version.split()[0],
+        "dtype": str(np.dtype(dtype)),
+        "spec": spec.to_dict(),
+        "command": list(sys.argv if command is None else command),
+    }
+
+
+def write_table(table: pd.DataFrame, path, metadata: dict) -> None:
+    """Write `table` to Parquet with `metadata` (JSON) under the key `jaxcascade`, atomically."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    path = pathlib.Path(path)
+    arrow = pa.Table.from_pandas(table, preserve_index=False)
+    schema_metadata = dict(arrow.schema.metadata or {})
+    schema_metadata[_METADATA_KEY] = json.dumps(metadata, sort_keys=True).encode()
+    arrow = arrow.replace_schema_metadata(schema_metadata)
+    partial = path.with_name(path.name + ".tmp")
+    pq.write_table(arrow, partial)
+    partial.replace(path)
+
+
+def read_metadata(path) -> dict:
+    """The `jaxcascade` metadata of a Parquet file written by `write_table` ({} if none)."""
+    import pyarrow.parquet as pq
+
+    metadata = pq.read_schema(path).metadata or {}
+    return json.loads(metadata[_METADATA_KEY]) if _METADATA_KEY in metadata else {}

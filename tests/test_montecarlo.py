@@ -1,0 +1,304 @@
+"""Monte-Carlo engine: batching, keys, resumability, summaries, comparisons, specs.
+
+Sizes are tiny (N = 300, a few realisations): these tests check the machinery, not the
+estimator. Every spec shares N = 300 and chunk size 3 where it can, so most tests reuse
+one compilation.
+"""
+
+import os
+import pathlib
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from jaxcascade._cli import main
+from jaxcascade._montecarlo import chunk_memory, run, run_chunk, run_realisation, summary_path
+from jaxcascade._spec import Cell, Spec
+from jaxcascade._tables import compare, read_metadata, summarise
+
+N = 300
+
+
+def small_spec(**changes) -> Spec:
+    fields = dict(example=1, n=N, snr=[25.0], realisations=8, seed=0, chunk_size=3)
+    return Spec(**{**fields, **changes})
+
+
+# ---- batching and keys -------------------------------------------------------------------
+
+
+def test_vmapped_chunk_equals_python_loop():
+    spec = small_spec()
+    cell = spec.cells()[0]
+    table = run_chunk(spec, cell, [0, 1, 2])
+    names = spec.orders.names
+    for row, index in zip(table.itertuples(), [0, 1, 2], strict=True):
+        one = run_realisation(spec, cell, index)
+        # Same operations, batched or not; only XLA's fusion choices differ (float64).
+        np.testing.assert_allclose(
+            [getattr(row, name) for name in names], one["estimate"], rtol=1e-9, atol=1e-12
+        )
+        assert (
+            row.status
+            == ("converged", "max_iterations", "diverged", "singular", "left_domain", "failed")[
+                int(one["status"])
+            ]
+        )
+        assert row.iterations == int(one["iterations"])
+        assert row.key == one["key"]
+        np.testing.assert_allclose(row.nrmse, one["nrmse"], rtol=1e-9)
+
+
+def test_table_independent_of_chunk_size_and_order():
+    spec3 = small_spec(snr=[25.0, 50.0])
+    spec7 = small_spec(snr=[25.0, 50.0], chunk_size=7)
+    a = run(spec3, progress=False)
+    b = run(spec7, progress=False)
+    pd.testing.assert_frame_equal(a, b, check_exact=True)
+    # Realisation 5 alone, in another batch position, gives the same row.
+    cell = spec3.cells()[1]
+    alone = run_chunk(spec3, cell, [5])
+    row = a[(a["snr"] == cell.snr) & (a["realisation"] == 5)].reset_index(drop=True)
+    pd.testing.assert_frame_equal(alone, row, check_exact=True)
+    # Different cells and realisations get different records.
+    assert a["key"].nunique() == len(a)
+    assert set(a.columns) >= {"status", "iterations", "cost", "nrmse", "MR1", "true_MR1"}
+    assert np.all(np.isfinite(a["nrmse"]) | (a["nrmse"] == np.inf))
+
+
+def test_estimators_see_the_same_records():
+    # The data key leaves out the estimator (common random numbers), so the key column
+    # of a cell is the same whatever the estimator; the seed changes it.
+    spec = small_spec(realisations=3)
+    other = small_spec(realisations=3, seed=1)
+    cell = spec.cells()[0]
+    a, b = run_chunk(spec, cell, [0, 1, 2]), run_chunk(other, cell, [0, 1, 2])
+    assert not np.any(a["key"].to_numpy() == b["key"].to_numpy())
+
+
+# ---- summaries ---------------------------------------------------------------------------
+
+
+def synthetic_table() -> pd.DataFrame:
+    # One cell: 4 admissible estimates 1, 2, 3, 4 of a parameter whose truth is 2, plus
+    # one inadmissible realisation that must not enter the moments but counts in rates.
+    estimates = [1.0, 2.0, 3.0, 4.0, 1e9]
+    return pd.DataFrame(
+        {
+            "system": "example1",
+            "n": 300,
+            "snr": 25.0,
+            "estimator": "literal",
+            "status": ["converged", "converged", "max_iterations", "converged", "diverged"],
+            "admissible": [True, True, True, True, False],
+            "recovered": [False, True, False, False, False],
+            "nrmse": [0.1, 0.2, 0.3, 0.4, np.inf],
+            "X": estimates,
+            "true_X": 2.0,
+        }
+    )
+
+
+def test_summary_statistics_and_standard_errors():
+    row = summarise(synthetic_table()).iloc[0]
+    s = np.std([1, 2, 3, 4], ddof=1)
+    assert (row["count"], row["used"]) == (5, 4)
+    assert row["mean"] == pytest.approx(2.5)
+    assert row["bias"] == pytest.approx(0.5)
+    assert row["bias_se"] == pytest.approx(s / 2)
+    assert row["std"] == pytest.approx(s)
+    assert row["std_se"] == pytest.approx(s / np.sqrt(6))
+    squared = np.array([1.0, 0.0, 1.0, 4.0])
+    assert row["rmse"] == pytest.approx(np.sqrt(1.5))
+    assert row["rmse_se"] == pytest.approx(np.std(squared, ddof=1) / 2 / (2 * np.sqrt(1.5)))
+    assert row["converged_rate"] == pytest.approx(0.6)
+    assert row["converged_rate_se"] == pytest.approx(np.sqrt(0.6 * 0.4 / 5))
+    assert row["recovered_rate"] == pytest.approx(0.2)
+    assert row["recovered_rate_se"] == pytest.approx(np.sqrt(0.2 * 0.8 / 5))
+    assert (row["count_converged"], row["count_max_iterations"], row["count_diverged"]) == (3, 1, 1)
+    assert row["nrmse_median"] == pytest.approx(0.3)
+
+
+def test_compare_flags_a_shifted_bias_and_passes_an_identical_baseline():
+    summary = summarise(synthetic_table())
+    assert not compare(summary, summary)["flagged"].any()
+    shifted = summary.copy()
+    shifted["bias"] += 4 * np.sqrt(2) * shifted["bias_se"]  # 4 combined SEs away
+    result = compare(summary, shifted)
+    flagged = result[result["flagged"]]
+    assert list(flagged["statistic"]) == ["bias"] and list(flagged["parameter"]) == ["X"]
+    nudged = summary.copy()
+    nudged["bias"] += 1 * nudged["bias_se"]  # within Monte-Carlo error
+    assert not compare(summary, nudged)["flagged"].any()
+    elsewhere = summary.assign(n=999)
+    with pytest.raises(ValueError, match="shares no grid cell"):
+        compare(summary, elsewhere)
+
+
+# ---- specs -------------------------------------------------------------------------------
+
+
+def test_spec_toml_round_trip(tmp_path):
+    text = """
+example = 2
+n = [300, 600]
+snr = [10, inf]
+realisations = 4
+seed = 3
+estimators = ["literal"]
+chunk_size = 2
+[input]
+amplitude = 2.0
+[estimator.literal]
+max_iterations = 20
+"""
+    path = tmp_path / "spec.toml"
+    path.write_text(text)
+    spec = Spec.load(path)
+    assert spec.n == (300, 600) and spec.snr == (10.0, np.inf)
+    assert spec.settings == {"literal": {"max_iterations": 20}}
+    assert Spec.from_dict(spec.to_dict()) == spec
+    assert [c.n for c in spec.cells()] == [300, 300, 600, 600]
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--n", "20"], "too small for orders"),
+        (["--snr", "0"], "SNR must be positive"),
+        (["--snr", "25,-1"], "SNR must be positive"),
+        (["--realisations", "0"], "'realisations' must be an integer >= 1"),
+        (["--estimator", "nonsense"], "Unknown estimator 'nonsense'"),
+        (["--example", "3"], "Unknown example 3"),
+    ],
+)
+def test_bad_specs_fail_before_any_file_is_written(tmp_path, capsys, extra, message):
+    out = tmp_path / "run" / "r.parquet"
+    argv = ["sweep", "--example", "1", "--n", "300", "--snr", "25", "--realisations", "2"]
+    assert main([*argv, *extra, "--out", str(out)]) == 2
+    error = capsys.readouterr().err
+    assert message in error and len(error.strip().splitlines()) == 1
+    assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("example = 1\nrealisation = 5\n", "Unknown spec field 'realisation'"),
+        ("example = 1\n[input]\namp = 2\n", "Unknown field 'amp' in [input]"),
+        ("example = 1\n[estimator.literal]\nmax_iter = 5\n", "Unknown setting 'max_iter'"),
+        (
+            "[system]\nparams = {MR1 = 1.0, ML1 = 1.0, cL = 0.1, mR = 1.0, cR = 0.1}\n",
+            "needs the sample sizes",
+        ),
+        ("example = 1\nn = 300\nsnr = [25, 25]\n", "repeats a value"),
+    ],
+)
+def test_bad_spec_files(tmp_path, capsys, text, message):
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    out = tmp_path / "run" / "r.parquet"
+    assert main(["sweep", str(path), "--out", str(out)]) == 2
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / "run").exists()
+
+
+def test_explicit_system_spec():
+    values = {"MR1": 1.0, "ML1": 0.5, "b1": -0.3, "cL": 0.1, "mR": 1.1, "cR": 0.2}
+    spec = Spec(params=values, n=[300], realisations=2)
+    assert str(spec.orders) == "1,1,1,1" and spec.system == "custom"
+    assert spec.true_values() == values
+
+
+# ---- command line, resumability, comparison ----------------------------------------------
+
+
+def sweep_argv(out, *extra):
+    return [
+        "sweep", "--example", "1", "--n", str(N), "--snr", "25,50", "--realisations", "30",
+        "--seed", "0", "--chunk-size", "3", "--out", str(out), *extra,
+    ]  # fmt: skip
+
+
+def test_killed_run_resumes_to_an_identical_table(tmp_path, capsys):
+    reference = tmp_path / "reference.parquet"
+    assert main(sweep_argv(reference)) == 0
+    expected = pd.read_parquet(reference)
+    assert len(expected) == 60 and not (tmp_path / "reference.parquet.partial").exists()
+    meta = read_metadata(reference)
+    assert meta["dtype"] == "float64" and meta["spec"]["snr"] == [25.0, 50.0]
+    assert {"jaxcascade", "jax", "numpy", "command"} <= set(meta)
+
+    out = tmp_path / "killed.parquet"
+    partial = tmp_path / "killed.parquet.partial"
+    env = {**os.environ, "JAX_PLATFORMS": "cpu"}
+    command = [sys.executable, "-m", "jaxcascade", *sweep_argv(out)]
+    process = subprocess.Popen(command, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    deadline = time.monotonic() + 120
+    while not list(partial.glob("chunk-*.parquet")):
+        assert process.poll() is None, process.stderr.read().decode()
+        assert time.monotonic() < deadline, "no chunk written within 120 s"
+        time.sleep(0.005)
+    process.send_signal(signal.SIGKILL)
+    process.wait()
+    process.stderr.close()
+    written = len(list(partial.glob("chunk-*.parquet")))
+    assert not out.exists() and 1 <= written < 20, written  # killed part-way
+
+    # A different spec may not continue it.
+    assert main([*sweep_argv(out), "--seed", "1"]) == 2
+    assert "different spec" in capsys.readouterr().err
+
+    assert main([*sweep_argv(out), "--resume"]) == 0
+    pd.testing.assert_frame_equal(pd.read_parquet(out), expected, check_exact=True)
+    assert not partial.exists()
+
+    # A finished run is reused only on request.
+    assert main(sweep_argv(out)) == 2
+    assert "already exists" in capsys.readouterr().err
+
+    # --compare: the same summary passes; a baseline with a shifted bias fails (exit 1).
+    baseline = summary_path(reference)
+    assert main([*sweep_argv(out), "--resume", "--compare", str(baseline)]) == 0
+    shifted = pd.read_csv(baseline)
+    pick = (shifted["parameter"] == "cR") & (shifted["snr"] == 50.0)
+    shifted.loc[pick, "bias"] += 10 * shifted.loc[pick, "bias_se"] + 1e-3
+    shifted_path = tmp_path / "shifted.summary.csv"
+    shifted.to_csv(shifted_path, index=False)
+    capsys.readouterr()
+    assert main([*sweep_argv(out), "--resume", "--compare", str(shifted_path)]) == 1
+    report = capsys.readouterr().out
+    assert "1 of" in report and " cR " in report
+
+
+def test_chunk_memory_is_reported():
+    spec = small_spec()
+    sizes = chunk_memory(spec, spec.cells()[0])
+    assert sizes["total"] >= sizes["temp"] > 0
+
+
+@pytest.mark.slow
+def test_chunk_memory_grows_linearly_in_chunk_size_and_n():
+    spec = small_spec()
+    totals = {
+        (c, n): chunk_memory(spec, Cell(n, 25.0, "literal"), c)["temp"]
+        for c in (4, 8)
+        for n in (300, 600)
+    }
+    # Doubling either the chunk or N at most doubles XLA's temporary buffers (+ slack).
+    assert totals[(8, 300)] <= 2.1 * totals[(4, 300)]
+    assert totals[(4, 600)] <= 2.1 * totals[(4, 300)]
+
+
+def test_plots_are_written(tmp_path):
+    table = run(small_spec(snr=[25.0, 50.0]), progress=False)
+    from jaxcascade._plot import plot_sweep
+
+    paths = plot_sweep(summarise(table), table, tmp_path, "demo")
+    assert len(paths) == 6
+    assert all(pathlib.Path(p).stat().st_size > 10_000 for p in paths)
