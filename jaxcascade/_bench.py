@@ -1,0 +1,315 @@
+"""`jaxcascade bench`: the performance benchmark of issue 6.
+
+The workload is a Monte-Carlo fit of a paper example: per realisation, draw a uniform
+input, simulate, add output noise at the example's SNR and run `iterations` steps of the
+literal Vörös iteration (`voros(..., tol=-1)`, so no early stop). Three figures come
+from one run on the same machine:
+
+- jaxcascade's batched path: `vmap` over PRNG keys of simulation, noise and `voros`,
+  compiled ahead of time (compile time reported separately), best of `repeats` runs;
+- the NumPy/SciPy baseline (`_baseline`), realisations one after another, on a subset,
+  in a separate process with one BLAS thread by default (see `run_baseline_process`);
+- the FLOP floor: flops per fit (`_flops`) over the measured float64 matmul rate.
+
+Peak memory is the peak resident set size of the process after the batched run (before
+the baseline and the matmul measurement, which would otherwise set it). XLA allocates
+outside Python's allocator, so tracemalloc would not see it.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import pathlib
+import platform
+import resource
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+from . import _baseline, _flops
+from ._cli import CLIError, writable_folder
+from ._examples import example as get_example
+
+SUMMARY_KEYS = (
+    "fits_per_s",
+    "baseline_fits_per_s",
+    "ratio",
+    "floor_fraction",
+    "compile_s",
+    "peak_mem_mb",
+    "device",
+)
+
+
+def peak_rss_mb() -> float:
+    """Peak resident set size of this process so far, in MiB (Linux reports KiB)."""
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return peak / (1024 * 1024) if platform.system() == "Darwin" else peak / 1024
+
+
+def device_description() -> str:
+    """The device JAX computes on, in words (with the CPU model and core count on CPU)."""
+    import jax
+
+    device = jax.devices()[0]
+    if device.platform != "cpu":
+        return f"{device.platform}: {device.device_kind}"
+    model = platform.processor() or platform.machine()
+    try:
+        for line in pathlib.Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                model = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    return f"cpu: {model} ({cores} cores)"
+
+
+def batched_fit(example_number: int, n: int, iterations: int, dtype=None):
+    """The jitted batched workload `(keys, params) -> (estimates, statuses)`."""
+    import jax
+    import jax.numpy as jnp
+
+    from ._estimate import voros
+    from ._simulate import measure, uniform_input
+
+    ex = get_example(example_number)
+    dtype = dtype or jnp.result_type(float)
+
+    def one(key, params):
+        key_u, key_e = jax.random.split(key)
+        u = uniform_input(key_u, n, ex.amplitude, dtype)
+        y, _ = measure(key_e, params, u, ex.snr)
+        solution = voros(u, y, ex.orders, max_iterations=iterations, tol=-1.0)
+        return solution.params.to_vector(), solution.status
+
+    return jax.jit(jax.vmap(one, in_axes=(0, None)))
+
+
+def run_jax(realisations: int, n: int, iterations: int, example_number=1, repeats=3, seed=0):
+    """Compile and time the batched path; returns a dict of figures."""
+    import jax
+    import jax.numpy as jnp
+
+    dtype = jnp.result_type(float)
+    params = get_example(example_number).params(dtype)
+    keys = jax.random.split(jax.random.PRNGKey(seed), realisations)
+    start = time.perf_counter()
+    compiled = batched_fit(example_number, n, iterations, dtype).lower(keys, params).compile()
+    compile_s = time.perf_counter() - start
+    best = math.inf
+    for _ in range(max(repeats, 1)):
+        start = time.perf_counter()
+        estimates, statuses = jax.block_until_ready(compiled(keys, params))
+        best = min(best, time.perf_counter() - start)
+    codes_counts = np.unique(np.asarray(statuses), return_counts=True)
+    return {
+        "fits_per_s": realisations / best,
+        "run_s": best,
+        "compile_s": compile_s,
+        "peak_mem_mb": peak_rss_mb(),
+        "finite_fraction": float(np.mean(np.all(np.isfinite(np.asarray(estimates)), axis=1))),
+        "status_counts": dict(zip(*(a.tolist() for a in codes_counts), strict=True)),
+        "dtype": str(np.dtype(dtype)),
+    }
+
+
+def _example_vector(example_number: int) -> np.ndarray:
+    ex = get_example(example_number)
+    return np.array([ex.values[name] for name in ex.orders.names], dtype=float)
+
+
+def run_baseline(realisations: int, n: int, iterations: int, example_number=1, seed=0):
+    """Time the NumPy/SciPy baseline on `realisations` records, one after another."""
+    ex = get_example(example_number)
+    vector = _example_vector(example_number)
+    _baseline.run(1, vector, ex.orders, n, ex.snr, 1, seed=seed)  # warm up imports and caches
+    _, seconds = _baseline.run(realisations, vector, ex.orders, n, ex.snr, iterations, seed=seed)
+    return {"baseline_fits_per_s": realisations / seconds, "baseline_s": seconds}
+
+
+_BLAS_THREADS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+def run_baseline_process(
+    realisations: int, n: int, iterations: int, example_number=1, seed=0, threads=1
+):
+    """`run_baseline` in a fresh process with `threads` BLAS threads.
+
+    The baseline's least-squares problems are tiny (N x P with P ~ 13): extra BLAS threads
+    only add synchronisation, and on a busy machine they slow it down many times over. The
+    thread count must be set before NumPy loads, hence the subprocess.
+    """
+    env = dict(os.environ, **{name: str(threads) for name in _BLAS_THREADS})
+    code = (
+        "import json, sys; from jaxcascade._bench import run_baseline; "
+        "print(json.dumps(run_baseline(*map(int, sys.argv[1:]))))"
+    )
+    arguments = [str(a) for a in (realisations, n, iterations, example_number, seed)]
+    done = subprocess.run(
+        [sys.executable, "-c", code, *arguments], env=env, capture_output=True, text=True
+    )
+    if done.returncode != 0:
+        raise RuntimeError(f"the baseline process failed: {done.stderr.strip()[-2000:]}")
+    result = json.loads(done.stdout.strip().splitlines()[-1])
+    result["baseline_threads"] = threads
+    return result
+
+
+def run_floor(n: int, iterations: int, example_number=1, matmul_size=2048, repeats=3):
+    """Flops per fit, the matmul rate and the floor in fits per second."""
+    flops = _flops.flops_per_fit(get_example(example_number).orders, n, iterations)["total"]
+    rates = _flops.matmul_rates(matmul_size, repeats)
+    backend, rate = _flops.machine_rate(rates)
+    return {
+        "flops_per_fit": flops,
+        "matmul_gflops": rate / 1e9,
+        "matmul_backend": backend,
+        "matmul_size": matmul_size,
+        "floor_fits_per_s": 1.0 / _flops.floor_time(flops, rate),
+    }
+
+
+def run_benchmark(
+    realisations=1000,
+    n=4000,
+    iterations=20,
+    example_number=1,
+    baseline_realisations=20,
+    matmul_size=2048,
+    repeats=3,
+    seed=0,
+    baseline_threads=1,
+) -> dict:
+    """The full benchmark; returns every figure (the `SUMMARY_KEYS` and the details)."""
+    record = {
+        "example": example_number,
+        "n": n,
+        "snr": get_example(example_number).snr,
+        "iterations": iterations,
+        "realisations": realisations,
+        "baseline_realisations": baseline_realisations,
+        "device": device_description(),
+    }
+    record.update(run_jax(realisations, n, iterations, example_number, repeats, seed))
+    record.update(
+        run_baseline_process(
+            baseline_realisations, n, iterations, example_number, seed, baseline_threads
+        )
+    )
+    record.update(run_floor(n, iterations, example_number, matmul_size, repeats))
+    record["ratio"] = record["fits_per_s"] / record["baseline_fits_per_s"]
+    record["floor_fraction"] = record["fits_per_s"] / record["floor_fits_per_s"]
+    return record
+
+
+def summary(record: dict) -> dict:
+    return {key: record[key] for key in SUMMARY_KEYS}
+
+
+def _report(r: dict) -> str:
+    return "\n".join(
+        [
+            f"workload: Example {r['example']}, N = {r['n']}, SNR {r['snr']:g}, "
+            f"{r['iterations']} iterations, {r['realisations']} realisations ({r['dtype']})",
+            f"device: {r['device']}",
+            f"jaxcascade: {r['fits_per_s']:.1f} fits/s ({r['run_s']:.3f} s per run; "
+            f"compile {r['compile_s']:.2f} s; statuses {r['status_counts']})",
+            f"numpy baseline: {r['baseline_fits_per_s']:.2f} fits/s "
+            f"({r['baseline_realisations']} realisations in {r['baseline_s']:.2f} s, "
+            f"{r['baseline_threads']} BLAS thread(s))",
+            f"ratio to baseline: {r['ratio']:.1f}",
+            f"floor: {r['flops_per_fit'] / 1e6:.2f} MFlop per fit at {r['matmul_gflops']:.1f} "
+            f"GFlop/s ({r['matmul_backend']} float64 matmul, {r['matmul_size']}^3) = "
+            f"{r['floor_fits_per_s']:.0f} fits/s; fraction reached {r['floor_fraction']:.3f}",
+            f"peak memory: {r['peak_mem_mb']:.0f} MB (peak RSS after the batched run)",
+        ]
+    )
+
+
+def _write_csv(record: dict, path: pathlib.Path) -> None:
+    row = {key: value for key, value in record.items() if key != "status_counts"}
+    row["status_counts"] = json.dumps(record["status_counts"])
+    row["jax_version"] = __import__("jax").__version__
+    row["date"] = time.strftime("%Y-%m-%dT%H:%M:%S")
+    with open(path, "w", newline="") as file:
+        writer = csv.DictWriter(file, fieldnames=list(row))
+        writer.writeheader()
+        writer.writerow(row)
+
+
+def _command(args) -> int:
+    ex = get_example(args.example)
+    checks = {
+        "--realisations": (args.realisations, 1),
+        "--n": (args.n, ex.orders.min_samples),
+        "--iterations": (args.iterations, 1),
+        "--baseline-realisations": (args.baseline_realisations, 1),
+        "--matmul-size": (args.matmul_size, 1),
+        "--repeats": (args.repeats, 1),
+        "--baseline-threads": (args.baseline_threads, 1),
+    }
+    for flag, (value, low) in checks.items():
+        if value < low:
+            raise CLIError(f"{flag} must be at least {low}, got {value}.")
+    out = pathlib.Path(args.out) if args.out else None
+    if out is not None:
+        writable_folder(out.parent)
+    record = run_benchmark(
+        args.realisations,
+        args.n,
+        args.iterations,
+        args.example,
+        args.baseline_realisations,
+        args.matmul_size,
+        args.repeats,
+        args.seed,
+        args.baseline_threads,
+    )
+    if out is not None:
+        _write_csv(record, out)
+    print(json.dumps(summary(record)) if args.json else _report(record))
+    return 0
+
+
+def add_parser(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "bench",
+        help="benchmark the batched fit against NumPy/SciPy and the FLOP floor",
+        description=(
+            "Time the Monte-Carlo workload (simulation, noise, a fixed number of Vörös "
+            "iterations per realisation) with jaxcascade's batched path, a NumPy/SciPy "
+            "baseline and the float64 FLOP floor of this machine."
+        ),
+    )
+    parser.add_argument("--realisations", type=int, default=1000, metavar="R")
+    parser.add_argument("--n", type=int, default=4000, metavar="N", help="samples per record")
+    parser.add_argument("--iterations", type=int, default=20, metavar="K")
+    parser.add_argument("--example", type=int, default=1, choices=(1, 2))
+    parser.add_argument(
+        "--baseline-realisations",
+        type=int,
+        default=20,
+        metavar="B",
+        help="realisations timed with the NumPy baseline (default 20)",
+    )
+    parser.add_argument(
+        "--baseline-threads",
+        type=int,
+        default=1,
+        help="BLAS threads of the baseline process (default 1: its problems are tiny)",
+    )
+    parser.add_argument(
+        "--matmul-size", type=int, default=2048, help="size of the float64 matmul for the floor"
+    )
+    parser.add_argument("--repeats", type=int, default=3, help="timed runs; the best counts")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--json", action="store_true", help="print the summary as JSON")
+    parser.add_argument("--out", default=None, help="also write every figure to this CSV file")
+    parser.set_defaults(func=_command)
