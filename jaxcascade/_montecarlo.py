@@ -293,11 +293,14 @@ def run(
     with tqdm(total=total, initial=initial, unit="realisation", disable=_disable(progress)) as bar:
         for cell, indices in _chunks(spec, done):
             frame = run_chunk(spec, cell, indices)
-            name = f"chunk-n{cell.n}-snr{cell.snr:g}-{cell.estimator}-{indices[0]:09d}.parquet"
+            # repr(snr) is exact, so two SNRs never share a file name.
+            name = f"chunk-n{cell.n}-snr{cell.snr!r}-{cell.estimator}-{indices[0]:09d}.parquet"
             write_table(frame, folder / name, {})
             bar.update(len(indices))
 
     table = _ordered(spec, _done(folder))
+    if len(table) != total:  # never write a table with realisations missing
+        raise RuntimeError(f"'{folder}' holds {len(table)} of {total} realisations.")
     write_table(table, out, run_metadata(spec, dtype, command))
     shutil.rmtree(folder)
     return pd.read_parquet(out)
@@ -395,8 +398,8 @@ def sweep(args) -> int:
     out = pathlib.Path(args.out)
     if out.suffix != ".parquet":
         raise CLIError(f"--out must name a .parquet file, got '{out}'.")
-    writable_folder(out.parent)
     baseline = read_summary(args.compare) if args.compare else None
+    writable_folder(out.parent)
     if args.plots:
         writable_folder(args.plots)
 
@@ -448,7 +451,9 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--amplitude", type=float, help="input uniform in (-A, A) (default 2)")
     parser.add_argument("--chunk-size", type=int, help="realisations per compiled batch")
     parser.add_argument("--out", help="results/NAME.parquet (default results/SPEC.parquet)")
-    parser.add_argument("--resume", action="store_true", help="reuse a finished OUT")
+    parser.add_argument(
+        "--resume", action="store_true", help="reuse a finished OUT (a killed run continues anyway)"
+    )
     parser.add_argument("--compare", metavar="BASELINE", help="baseline summary to compare with")
     parser.add_argument(
         "--threshold", type=float, default=3.0, help="flag |diff| > T * combined MC error (3)"
