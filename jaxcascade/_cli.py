@@ -16,6 +16,7 @@ import sys
 _SUBCOMMANDS = [
     "jaxcascade._reproduce",
     "jaxcascade._montecarlo",
+    "jaxcascade._fit",
     "jaxcascade._bench",
 ]
 

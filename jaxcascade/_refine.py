@@ -131,6 +131,38 @@ class Refined(eqx.Module):
     steps: Array
 
 
+def least_squares(residual, z0, args, *, max_steps: int = 100, rtol=1e-8, atol=1e-10):
+    """Levenberg-Marquardt on `residual(z, args)` from `z0`, never raising.
+
+    **Returns:** `(z, cost, status, steps)` with `cost` the mean squared residual
+    (inf if non-finite) and `status` a `Status` code.
+    """
+    solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
+    solution = optx.least_squares(residual, solver, z0, args=args, max_steps=max_steps, throw=False)
+    cost = jnp.mean(residual(solution.value, args) ** 2)
+    finite = jnp.isfinite(cost) & jnp.all(jnp.isfinite(solution.value))
+    status = jnp.where(
+        ~finite,
+        Status.diverged,
+        jnp.where(
+            solution.result == optx.RESULTS.successful,
+            Status.converged,
+            jnp.where(
+                solution.result == optx.RESULTS.max_steps_reached,
+                Status.max_iterations,
+                Status.failed,
+            ),
+        ),
+    )
+    z = jnp.where(finite, solution.value, z0)
+    return (
+        z,
+        jnp.where(finite, cost, jnp.inf),
+        status.astype(jnp.int32),
+        solution.stats["num_steps"],
+    )
+
+
 def refine(
     init: CascadeParams,
     u: Float[Array, " T"],
@@ -149,29 +181,9 @@ def refine(
         return simulation_error(from_unconstrained(z, orders, u_min, u_max), u, y)
 
     z0 = to_unconstrained(init.astype(u.dtype), u_min, u_max)
-    solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
-    solution = optx.least_squares(
-        residual, solver, z0, args=(u, y), max_steps=max_steps, throw=False
-    )
-    params = from_unconstrained(solution.value, orders, u_min, u_max)
-    cost = jnp.mean(residual(solution.value, (u, y)) ** 2)
-    finite = jnp.isfinite(cost) & jnp.all(jnp.isfinite(solution.value))
-    status = jnp.where(
-        ~finite,
-        Status.diverged,
-        jnp.where(
-            solution.result == optx.RESULTS.successful,
-            Status.converged,
-            jnp.where(
-                solution.result == optx.RESULTS.max_steps_reached,
-                Status.max_iterations,
-                Status.failed,
-            ),
-        ),
+    z, cost, status, steps = least_squares(
+        residual, z0, (u, y), max_steps=max_steps, rtol=rtol, atol=atol
     )
     return Refined(
-        params=params,
-        cost=jnp.where(finite, cost, jnp.inf),
-        status=status.astype(jnp.int32),
-        steps=solution.stats["num_steps"],
+        params=from_unconstrained(z, orders, u_min, u_max), cost=cost, status=status, steps=steps
     )
