@@ -122,13 +122,13 @@ def plot_convergence_rate(summary: pd.DataFrame, path) -> None:
 def plot_distributions(table: pd.DataFrame, path, n: int | None = None) -> None:
     """Box plots of every parameter's estimates versus SNR at one N (default the largest).
 
-    Only admissible estimates are drawn (as in the summary); the dashed line is the truth.
+    Only the estimates the summary uses are drawn (`used_mask`); the dashed line is the truth.
     """
     plt = _pyplot()
-    from ._tables import parameter_names, true_column
+    from ._tables import parameter_names, true_column, used_mask
 
     n = int(table["n"].max()) if n is None else n
-    data = table[(table["n"] == n) & table["admissible"]]
+    data = table[(table["n"].to_numpy() == n) & used_mask(table)]
     names = parameter_names(table)
     groups = list(data.groupby(["estimator", "snr"], sort=True))
     fig, axes = _grid(plt, len(names), width=3.6)
@@ -149,7 +149,9 @@ def plot_distributions(table: pd.DataFrame, path, n: int | None = None) -> None:
         ax.axhline(float(table[true_column(name)].iloc[0]), color="k", ls="--", lw=0.8)
         ax.set_title(name, fontsize=10)
         ax.set_xlabel("SNR")
-    fig.suptitle(f"Distributions of the estimates, N = {n} (admissible estimates; dashed: truth)")
+    fig.suptitle(
+        f"Distributions of the estimates, N = {n} (estimates used in the summary; dashed: truth)"
+    )
     fig.savefig(path, dpi=110)
     plt.close(fig)
 

@@ -10,9 +10,11 @@ of the truth), one column per parameter with the estimate, and `true_<name>` wit
 true value.
 
 **Summary**: one row per grid cell and parameter. The estimate statistics (mean,
-bias, std, RMSE) use only the realisations whose estimate is finite and admissible
-(`used` says how many of `count`): an inadmissible estimate is not a model, and one
-blown-up realisation would otherwise swamp every moment. Failures are not hidden:
+bias, std, RMSE) use only the realisations whose estimate is finite and admissible and
+that accepted at least one step (`used` says how many of `count`): an inadmissible
+estimate is not a model, one blown-up realisation would otherwise swamp every moment,
+and a fit that failed at its first step returns its initial values, which are no
+estimate at all (they would drag the mean toward the initial guess). Failures are not hidden:
 `count_<status>` counts every status, and the two rates use all realisations:
 `converged_rate` (status converged) and `recovered_rate` (converged and within
 `TOLERANCE`). Each statistic has its Monte-Carlo standard error (`*_se`):
@@ -90,13 +92,18 @@ def _rate(hits: np.ndarray) -> tuple[float, float]:
     return p, float(np.sqrt(p * (1 - p) / n)) if n else float("nan")
 
 
+def used_mask(table: pd.DataFrame) -> np.ndarray:
+    """Rows whose estimate enters the moments: admissible and at least one step accepted."""
+    return table["admissible"].to_numpy(bool) & (table["iterations"].to_numpy() > 0)
+
+
 def summarise(table: pd.DataFrame) -> pd.DataFrame:
     """Per grid cell and parameter: mean, bias, std, RMSE, rates, each with its MC error."""
     names = parameter_names(table)
     rows = []
     for cell, group in table.groupby(CELL_COLUMNS, sort=False, dropna=False):
         count = len(group)
-        used = group[group["admissible"].to_numpy(bool)]
+        used = group[used_mask(group)]
         m = len(used)
         status = group["status"].to_numpy(str)
         converged, converged_se = _rate(status == Status.converged.name)

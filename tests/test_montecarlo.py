@@ -86,18 +86,27 @@ def test_estimators_see_the_same_records():
 
 def synthetic_table() -> pd.DataFrame:
     # One cell: 4 admissible estimates 1, 2, 3, 4 of a parameter whose truth is 2, plus
-    # one inadmissible realisation that must not enter the moments but counts in rates.
-    estimates = [1.0, 2.0, 3.0, 4.0, 1e9]
+    # one inadmissible realisation and one that accepted no step (its estimate is the
+    # initial guess); neither enters the moments, both count in the rates.
+    estimates = [1.0, 2.0, 3.0, 4.0, 1e9, 0.0]
     return pd.DataFrame(
         {
             "system": "example1",
             "n": 300,
             "snr": 25.0,
             "estimator": "literal",
-            "status": ["converged", "converged", "max_iterations", "converged", "diverged"],
-            "admissible": [True, True, True, True, False],
-            "recovered": [False, True, False, False, False],
-            "nrmse": [0.1, 0.2, 0.3, 0.4, np.inf],
+            "status": [
+                "converged",
+                "converged",
+                "max_iterations",
+                "converged",
+                "diverged",
+                "singular",
+            ],
+            "iterations": [5, 6, 50, 7, 3, 0],
+            "admissible": [True, True, True, True, False, True],
+            "recovered": [False, True, False, False, False, False],
+            "nrmse": [0.1, 0.2, 0.3, 0.4, np.inf, 1.0],
             "X": estimates,
             "true_X": 2.0,
         }
@@ -107,7 +116,7 @@ def synthetic_table() -> pd.DataFrame:
 def test_summary_statistics_and_standard_errors():
     row = summarise(synthetic_table()).iloc[0]
     s = np.std([1, 2, 3, 4], ddof=1)
-    assert (row["count"], row["used"]) == (5, 4)
+    assert (row["count"], row["used"]) == (6, 4)
     assert row["mean"] == pytest.approx(2.5)
     assert row["bias"] == pytest.approx(0.5)
     assert row["bias_se"] == pytest.approx(s / 2)
@@ -116,12 +125,13 @@ def test_summary_statistics_and_standard_errors():
     squared = np.array([1.0, 0.0, 1.0, 4.0])
     assert row["rmse"] == pytest.approx(np.sqrt(1.5))
     assert row["rmse_se"] == pytest.approx(np.std(squared, ddof=1) / 2 / (2 * np.sqrt(1.5)))
-    assert row["converged_rate"] == pytest.approx(0.6)
-    assert row["converged_rate_se"] == pytest.approx(np.sqrt(0.6 * 0.4 / 5))
-    assert row["recovered_rate"] == pytest.approx(0.2)
-    assert row["recovered_rate_se"] == pytest.approx(np.sqrt(0.2 * 0.8 / 5))
-    assert (row["count_converged"], row["count_max_iterations"], row["count_diverged"]) == (3, 1, 1)
-    assert row["nrmse_median"] == pytest.approx(0.3)
+    assert row["converged_rate"] == pytest.approx(0.5)
+    assert row["converged_rate_se"] == pytest.approx(np.sqrt(0.5 * 0.5 / 6))
+    assert row["recovered_rate"] == pytest.approx(1 / 6)
+    assert row["recovered_rate_se"] == pytest.approx(np.sqrt(1 / 6 * 5 / 6 / 6))
+    counts = [row[f"count_{s}"] for s in ("converged", "max_iterations", "diverged", "singular")]
+    assert counts == [3, 1, 1, 1]
+    assert row["nrmse_median"] == pytest.approx(0.35)
 
 
 def test_compare_flags_a_shifted_bias_and_passes_an_identical_baseline():
