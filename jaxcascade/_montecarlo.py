@@ -16,7 +16,18 @@ parameters and orders, the input distribution, N and SNR. Nothing else enters: n
 chunking, not the order of execution, and not the estimator, so every estimator of a
 sweep sees the same records (common random numbers: differences between estimators
 are not Monte-Carlo noise). An estimator with random starts gets its own key folded
-from the realisation key and its name.
+from the realisation key and its name. For a family of systems (`Spec.family`) the
+cell identity names the family and orders instead of the true values, and realisation
+`i` draws its true system from `fold_in(realisation_key, hash("system:FAMILY"))`: every
+estimator of a sweep fits the same system and record, and the table stores each row's
+truth (`true_<name>`).
+
+**Timing.** Each chunk is compiled ahead of time (once per process and cell shape) and
+then timed: `fit_seconds` is the wall time of the compiled batched call (with the
+transfer of its results to the host) divided by the batch size (the padded rows are
+computed too), and `compile_seconds` the time this chunk spent compiling (0 when the
+executable was already there). Both vary from run to run; `TIMING_COLUMNS` names them,
+and `without_timing` drops them to compare tables exactly.
 
 **Memory.** Peak memory of a chunk grows as `chunk_size x N` (each realisation holds a
 few `N x P` regression matrices and signals of length N); `chunk_memory` reports
@@ -30,6 +41,7 @@ import hashlib
 import json
 import pathlib
 import shutil
+import time
 
 import jax
 import jax.numpy as jnp
@@ -38,8 +50,9 @@ import pandas as pd
 
 from ._estimators import estimator, takes
 from ._model import CascadeParams, is_admissible
+from ._prior import random_system
 from ._simulate import add_noise, simulate, uniform_input
-from ._spec import Cell, Spec
+from ._spec import FAMILIES, Cell, Spec
 from ._tables import CELL_COLUMNS, realisation_frame, run_metadata, write_table
 
 
@@ -50,11 +63,16 @@ def _hash_words(text: str) -> np.ndarray:
 
 def cell_identity(spec: Spec, cell: Cell) -> str:
     """What a cell's records depend on, as canonical text (floats in exact hex form)."""
-    values = {name: float(value).hex() for name, value in spec.true_values().items()}
+    if spec.family is not None:
+        system = {"family": spec.family}
+    else:
+        system = {
+            "values": {name: float(value).hex() for name, value in spec.true_values().items()}
+        }
     return json.dumps(
         {
             "orders": str(spec.orders),
-            "values": values,
+            **system,
             "input": spec.input,
             "amplitude": float(spec.amplitude).hex(),
             "n": int(cell.n),
@@ -72,11 +90,24 @@ def cell_key(spec: Spec, cell: Cell):
     return key
 
 
-def _realisation(cell_key, index, truth_vector, snr, *, orders, n, amplitude, fit, fit_key_tag):
-    """One record: input, noisy output, fit, validation on a fresh record."""
+def _system_tag(family: str) -> np.uint32:
+    return np.uint32(_hash_words(f"system:{family}")[0])
+
+
+def _realisation(
+    cell_key, index, truth_vector, snr, *, orders, n, amplitude, fit, fit_key_tag, family
+):
+    """One record: input, noisy output, fit, validation on a fresh record.
+
+    With a `family`, `truth_vector` only gives the dtype: the true system is drawn from
+    the family's prior with a key folded from the realisation key.
+    """
     dtype = truth_vector.dtype
-    truth = CascadeParams.from_vector(truth_vector, orders, check=False)
     key = jax.random.fold_in(cell_key, index)
+    if family is not None:
+        system_key = jax.random.fold_in(key, _system_tag(family))
+        truth_vector = random_system(system_key, orders, amplitude, dtype).to_vector()
+    truth = CascadeParams.from_vector(truth_vector, orders, check=False)
     key_u, key_e, key_u_val, key_e_val = jax.random.split(key, 4)
     u = uniform_input(key_u, n, amplitude, dtype)
     y = add_noise(key_e, simulate(truth, u), snr)
@@ -105,6 +136,7 @@ def _realisation(cell_key, index, truth_vector, snr, *, orders, n, amplitude, fi
         "cost": jnp.asarray(solution.cost, dtype),
         "nrmse": nrmse,
         "admissible": admissible,
+        "truth": truth_vector,
     }
 
 
@@ -113,14 +145,20 @@ def _is_typed(key) -> bool:
 
 
 @functools.lru_cache(maxsize=64)
-def _compiled(orders, n, amplitude, name, settings, batched):
+def _compiled(orders, n, amplitude, name, settings, batched, family=None):
     """The jitted (optionally vmapped) realisation function of one cell shape."""
     fit = functools.partial(estimator(name), **dict(settings))
     if takes(name, "input_range"):
         fit = functools.partial(fit, input_range=(-amplitude, amplitude))
     tag = np.uint32(_hash_words(f"estimator:{name}")[0]) if takes(name, "key") else None
     one = functools.partial(
-        _realisation, orders=orders, n=n, amplitude=amplitude, fit=fit, fit_key_tag=tag
+        _realisation,
+        orders=orders,
+        n=n,
+        amplitude=amplitude,
+        fit=fit,
+        fit_key_tag=tag,
+        family=family,
     )
     if batched:
         one = jax.vmap(one, in_axes=(None, 0, None, None))
@@ -129,13 +167,50 @@ def _compiled(orders, n, amplitude, name, settings, batched):
 
 def _arguments(spec: Spec, cell: Cell, dtype=None):
     dtype = dtype or jnp.result_type(float)
-    truth = spec.truth(dtype).to_vector()
+    if spec.family is not None:  # drawn per realisation; only the shape and dtype matter
+        truth = jnp.zeros((len(spec.orders.names),), dtype)
+    else:
+        truth = spec.truth(dtype).to_vector()
     return cell_key(spec, cell), truth, jnp.asarray(cell.snr, dtype)
 
 
 def _function(spec: Spec, cell: Cell, batched: bool):
     settings = spec.estimator_settings(cell.estimator)
-    return _compiled(spec.orders, cell.n, spec.amplitude, cell.estimator, settings, batched)
+    return _compiled(
+        spec.orders, cell.n, spec.amplitude, cell.estimator, settings, batched, spec.family
+    )
+
+
+# Ahead-of-time compiled chunk executables of this process, so that compiling is timed
+# apart from computing. Keyed by everything the executable depends on.
+_EXECUTABLES: dict = {}
+_MAX_EXECUTABLES = 64
+
+
+def _executable(spec: Spec, cell: Cell, arguments) -> tuple:
+    """(compiled batched function, seconds spent compiling it now: 0 if cached)."""
+    key, indices, truth, snr = arguments
+    cache_key = (
+        spec.orders,
+        cell.n,
+        spec.amplitude,
+        cell.estimator,
+        spec.estimator_settings(cell.estimator),
+        spec.family,
+        indices.shape,
+        str(truth.dtype),
+        str(key.dtype),
+        key.shape,
+    )
+    if cache_key in _EXECUTABLES:
+        return _EXECUTABLES[cache_key], 0.0
+    start = time.perf_counter()
+    compiled = _function(spec, cell, batched=True).lower(*arguments).compile()
+    seconds = time.perf_counter() - start
+    if len(_EXECUTABLES) >= _MAX_EXECUTABLES:
+        _EXECUTABLES.pop(next(iter(_EXECUTABLES)))
+    _EXECUTABLES[cache_key] = compiled
+    return compiled, seconds
 
 
 def run_chunk(spec: Spec, cell: Cell, indices) -> pd.DataFrame:
@@ -153,11 +228,15 @@ def run_chunk(spec: Spec, cell: Cell, indices) -> pd.DataFrame:
     size = max(spec.chunk_size, indices.size)
     padded = np.concatenate([indices, np.full(size - indices.size, indices[-1])])
     key, truth, snr = _arguments(spec, cell)
-    outputs = _function(spec, cell, batched=True)(
-        key, jnp.asarray(padded.astype(np.uint32)), truth, snr
-    )
-    outputs = {k: np.asarray(v)[: indices.size] for k, v in jax.device_get(outputs).items()}
+    arguments = (key, jnp.asarray(padded.astype(np.uint32)), truth, snr)
+    compiled, compile_seconds = _executable(spec, cell, arguments)
+    start = time.perf_counter()
+    outputs = jax.device_get(compiled(*arguments))
+    seconds = time.perf_counter() - start
+    outputs = {k: np.asarray(v)[: indices.size] for k, v in outputs.items()}
     outputs["key"] = _key_to_uint64(outputs["key"])
+    outputs["fit_seconds"] = seconds / size
+    outputs["compile_seconds"] = compile_seconds
     return realisation_frame(spec, cell, indices, outputs)
 
 
@@ -359,11 +438,22 @@ def spec_from_args(args) -> Spec:
             data = tomllib.loads(path.read_text())
         except tomllib.TOMLDecodeError as error:
             raise ValueError(f"Spec file '{path}' is not valid TOML: {error}.") from None
-    elif args.example is None:
-        raise CLIError("give a spec file or --example (see 'jaxcascade sweep --help').")
+    elif args.example is None and args.system is None:
+        raise CLIError("give a spec file, --example or --system (see 'jaxcascade sweep --help').")
+    if args.example is not None and args.system is not None:
+        raise CLIError("give either --example or --system, not both.")
     if args.example is not None:
         data.pop("system", None)
         data["example"] = args.example
+    if args.system is not None:
+        data.pop("example", None)
+        data["system"] = {"family": args.system}
+    if args.orders is not None:
+        if "example" in data:
+            raise CLIError("--orders needs a family or explicit system; an example has its own.")
+        system = data.get("system", {})
+        system = {"family": system} if isinstance(system, str) else dict(system)
+        data["system"] = {**system, "orders": args.orders}
     for field, value in (
         ("n", args.n),
         ("snr", args.snr),
@@ -441,6 +531,13 @@ def add_parser(subparsers) -> None:
     )
     parser.add_argument("spec", nargs="?", help="TOML spec file (see jaxcascade._spec)")
     parser.add_argument("--example", type=int, help="paper example, 1 or 2")
+    parser.add_argument(
+        "--system",
+        choices=FAMILIES,
+        help="a family of systems: 'random' draws each realisation's system from the "
+        "documented prior (default N 3000, SNR 30)",
+    )
+    parser.add_argument("--orders", help="nR,nL,r,p of a family (default 2,2,2,2)")
     parser.add_argument(
         "--snr", type=_list(float, "--snr"), help="e.g. 10,25,50 (inf = noise-free)"
     )

@@ -123,6 +123,8 @@ def plot_distributions(table: pd.DataFrame, path, n: int | None = None) -> None:
     """Box plots of every parameter's estimates versus SNR at one N (default the largest).
 
     Only the estimates the summary uses are drawn (`used_mask`); the dashed line is the truth.
+    For a family of systems (the truth varies by row) the errors `estimate - truth` are
+    drawn instead, around a dashed zero.
     """
     plt = _pyplot()
     from ._tables import parameter_names, true_column, used_mask
@@ -133,8 +135,13 @@ def plot_distributions(table: pd.DataFrame, path, n: int | None = None) -> None:
     groups = list(data.groupby(["estimator", "snr"], sort=True))
     fig, axes = _grid(plt, len(names), width=3.6)
     for ax, name in zip(axes, names, strict=False):
+        truth = table[true_column(name)].to_numpy()
+        varying = not np.all(truth == truth[0])
         ax.boxplot(
-            [group[name].to_numpy() for _, group in groups],
+            [
+                group[name].to_numpy() - (group[true_column(name)].to_numpy() if varying else 0)
+                for _, group in groups
+            ],
             showfliers=True,
             flierprops={"ms": 2, "alpha": 0.4},
         )
@@ -146,8 +153,8 @@ def plot_distributions(table: pd.DataFrame, path, n: int | None = None) -> None:
             ],
             fontsize=7,
         )
-        ax.axhline(float(table[true_column(name)].iloc[0]), color="k", ls="--", lw=0.8)
-        ax.set_title(name, fontsize=10)
+        ax.axhline(0.0 if varying else float(truth[0]), color="k", ls="--", lw=0.8)
+        ax.set_title(f"{name} - truth" if varying else name, fontsize=10)
         ax.set_xlabel("SNR")
     fig.suptitle(
         f"Distributions of the estimates, N = {n} (estimates used in the summary; dashed: truth)"

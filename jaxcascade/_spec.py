@@ -1,13 +1,14 @@
 """Experiment specification of a Monte-Carlo sweep: a dataclass and its TOML form.
 
-A spec names one system (a paper example or explicit parameters and orders), the input
+A spec names one system (a paper example, explicit parameters and orders, or a family of
+random systems with one true system drawn per realisation), the input
 distribution, and a grid of sample sizes x SNRs x estimators; each grid cell runs
 `realisations` independent records. Everything is validated at construction, so a bad
 spec fails with one sentence before any work starts.
 
 TOML layout (every key optional except the system):
 
-    example = 1                      # or a [system] table
+    example = 1                      # or a [system] table, or system = "random"
     n = [500, 1000, 4000]
     snr = [10, 25, 50]               # sqrt(var y / var e); inf = noise-free
     realisations = 500
@@ -22,6 +23,10 @@ TOML layout (every key optional except the system):
     [system]                         # instead of `example`
     orders = "2,2,2,2"               # optional, inferred from the names
     params = { MR1 = 1.2, MR2 = -1.4, DR1 = 1.0, ... }
+
+    [system]                         # or: the random family (`_prior.random_system`)
+    family = "random"                # same as the top-level `system = "random"`
+    orders = "2,2,2,2"               # optional, default 2,2,2,2
 
     [estimator.literal]              # settings passed to the estimator
     max_iterations = 50
@@ -44,6 +49,10 @@ from ._examples import EXAMPLES
 from ._model import CascadeParams, Orders
 
 INPUT_DISTRIBUTIONS = ("uniform",)
+# Families of systems: every realisation draws its own true system from a prior.
+FAMILIES = ("random",)
+# The issue-4 benchmark family: N = 3000, SNR 30 unless the spec says otherwise.
+_FAMILY_DEFAULTS = {"random": {"n": 3000, "snr": 30.0}}
 
 _TOP_LEVEL = (
     "example",
@@ -103,6 +112,10 @@ class Spec:
     - `example`: paper example number (1 or 2), or `None` when `params` is given.
     - `params`: explicit true values `{name: value}`; `orders` (an `Orders` or
       `"nR,nL,r,p"`) defaults to the orders implied by the names.
+    - `family`: `"random"`, the random-system prior of `_prior.random_system` (with
+      `u_max = amplitude`): realisation `i` draws its own true system from a key folded
+      from its realisation key, so every estimator of a sweep sees the same system and
+      record; `orders` default `2,2,2,2`, `n` 3000 and `snr` 30.
     - `input`, `amplitude`: input distribution, `"uniform"` in `(-amplitude, amplitude)`.
     - `n`, `snr`: sample sizes and SNRs (`sqrt(var y / var e)`, `inf` = noise-free);
       default the example's own (N, 25).
@@ -114,6 +127,7 @@ class Spec:
 
     example: int | None = None
     params: Mapping[str, float] | None = None
+    family: str | None = None
     orders: Orders | str | None = None
     input: str = "uniform"
     amplitude: float = 2.0
@@ -127,11 +141,22 @@ class Spec:
 
     def __post_init__(self):
         set_ = object.__setattr__
-        if (self.example is None) == (self.params is None):
+        if sum(x is not None for x in (self.example, self.params, self.family)) != 1:
             raise ValueError(
-                "A spec needs exactly one system: an example number or explicit params."
+                "A spec needs exactly one system: an example number, explicit params or "
+                "a family ('random')."
             )
-        if self.example is not None:
+        if self.family is not None:
+            if self.family not in FAMILIES:
+                raise ValueError(
+                    f"Unknown system family {self.family!r}; known: {', '.join(FAMILIES)}."
+                )
+            orders = Orders.parse(self.orders) if isinstance(self.orders, str) else self.orders
+            set_(self, "orders", orders if orders is not None else Orders())
+            defaults = _FAMILY_DEFAULTS[self.family]
+            set_(self, "n", self.n if self.n is not None else defaults["n"])
+            set_(self, "snr", self.snr if self.snr is not None else defaults["snr"])
+        elif self.example is not None:
             if isinstance(self.example, bool) or self.example not in EXAMPLES:
                 raise ValueError(
                     f"Unknown example {self.example!r}; the paper has examples "
@@ -215,19 +240,30 @@ class Spec:
 
     @property
     def system(self) -> str:
-        """Label of the system in tables: `example1`, `example2` or `custom`."""
+        """Label of the system in tables: `example1`, `example2`, `custom` or the family."""
+        if self.family is not None:
+            return self.family
         return f"example{self.example}" if self.example is not None else "custom"
 
     def truth(self, dtype=None) -> CascadeParams:
-        """The true parameters."""
+        """The true parameters (ValueError for a family: each realisation has its own)."""
+        self._check_fixed()
         dtype = dtype or jnp.result_type(float)
         if self.example is not None:
             return EXAMPLES[self.example].params(dtype)
         return CascadeParams.from_dict(self.params, self.orders).astype(dtype)
 
     def true_values(self) -> dict[str, float]:
+        self._check_fixed()
         values = EXAMPLES[self.example].values if self.example is not None else self.params
         return {name: float(values[name]) for name in self.orders.names}
+
+    def _check_fixed(self) -> None:
+        if self.family is not None:
+            raise ValueError(
+                f"The {self.family!r} family has no single true system: each realisation "
+                "draws its own (see the true_<name> columns of the realisation table)."
+            )
 
     def cells(self) -> list[Cell]:
         """Grid cells in table order: N outermost, then SNR, then estimator."""
@@ -244,6 +280,8 @@ class Spec:
         out: dict[str, Any] = {}
         if self.example is not None:
             out["example"] = self.example
+        elif self.family is not None:
+            out["system"] = {"family": self.family, "orders": str(self.orders)}
         else:
             out["system"] = {"orders": str(self.orders), "params": dict(self.params)}
         out["input"] = {"distribution": self.input, "amplitude": self.amplitude}
@@ -277,10 +315,16 @@ class Spec:
             if key in data:
                 kwargs[key] = data[key]
         if "system" in data:
-            system = _table(data["system"], "system", ("params", "orders"))
-            if "params" not in system:
-                raise ValueError("Spec table [system] needs 'params'.")
-            kwargs["params"] = system["params"]
+            system = data["system"]
+            if isinstance(system, str):  # system = "random"
+                system = {"family": system}
+            system = _table(system, "system", ("params", "orders", "family"))
+            if "params" not in system and "family" not in system:
+                raise ValueError("Spec table [system] needs 'params' or 'family'.")
+            if "params" in system:
+                kwargs["params"] = system["params"]
+            if "family" in system:
+                kwargs["family"] = system["family"]
             kwargs["orders"] = system.get("orders")
         if "input" in data:
             table = _table(data["input"], "input", ("distribution", "amplitude"))

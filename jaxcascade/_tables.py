@@ -6,8 +6,11 @@ index in the cell) and `key` (its PRNG key data as one uint64, enough to rerun i
 `status` (a `Status` name), `iterations`, `cost` (the estimator's final cost),
 `nrmse` (validation NRMSE on a fresh record; `inf` for an inadmissible estimate),
 `admissible`, `recovered` (status converged and every parameter within `TOLERANCE`
-of the truth), one column per parameter with the estimate, and `true_<name>` with the
-true value.
+of the truth), one column per parameter with the estimate, `true_<name>` with the
+true value (the row's own for a family of systems), and the timing columns
+`fit_seconds` (compute seconds per fit of its chunk, compilation excluded) and
+`compile_seconds` (seconds its chunk spent compiling, 0 when cached); the timing
+columns are the only ones that differ between two runs of one spec (`without_timing`).
 
 **Summary**: one row per grid cell and parameter. The estimate statistics (mean,
 bias, std, RMSE) use only the realisations whose estimate is finite and admissible and
@@ -17,7 +20,12 @@ and a fit that failed at its first step returns its initial values, which are no
 estimate at all (they would drag the mean toward the initial guess). Failures are not hidden:
 `count_<status>` counts every status, and the two rates use all realisations:
 `converged_rate` (status converged) and `recovered_rate` (converged and within
-`TOLERANCE`). Each statistic has its Monte-Carlo standard error (`*_se`):
+`TOLERANCE`). Errors are taken against each row's truth, so for a family of systems
+`bias` is the mean of `estimate - truth`, `std` the standard deviation of that error
+and `true`/`mean` the means of the truth and the estimates over the rows used; for a
+fixed system these are the usual moments of the estimate. Timing per cell:
+`fit_seconds_median`, `fit_seconds_mean` and `compile_seconds` (the largest compile
+time of a chunk: one compilation). Each statistic has its Monte-Carlo standard error (`*_se`):
 mean and bias `s / sqrt(m)`; std `s / sqrt(2 (m - 1))` (normal approximation);
 RMSE by the delta method, `sd(e^2) / (2 RMSE sqrt(m))`; rates `sqrt(p (1 - p) / count)`.
 """
@@ -34,6 +42,7 @@ import pandas as pd
 from ._status import Status
 
 CELL_COLUMNS = ["system", "n", "snr", "estimator"]
+TIMING_COLUMNS = ["fit_seconds", "compile_seconds"]
 TOLERANCE = 0.05
 _METADATA_KEY = b"jaxcascade"
 
@@ -48,15 +57,24 @@ def parameter_names(table: pd.DataFrame) -> list[str]:
     return [c[len(prefix) :] for c in table.columns if c.startswith(prefix)]
 
 
+def without_timing(table: pd.DataFrame) -> pd.DataFrame:
+    """`table` without the timing columns: what two runs of one spec must share exactly."""
+    return table.drop(columns=[c for c in TIMING_COLUMNS if c in table.columns])
+
+
 def realisation_frame(spec, cell, indices, outputs: dict) -> pd.DataFrame:
     """Rows of one chunk from the host arrays returned by the batched run."""
     from ._status import status_names
 
     names = spec.orders.names
-    truth = spec.true_values()
     estimates = np.asarray(outputs["estimate"], dtype=np.float64)
     count = len(indices)
-    errors = np.abs(estimates - np.array([truth[name] for name in names]))
+    if spec.family is not None:  # each row has its own true system
+        truth = np.asarray(outputs["truth"], dtype=np.float64).reshape(count, len(names))
+    else:
+        values = spec.true_values()
+        truth = np.tile(np.array([values[name] for name in names], np.float64), (count, 1))
+    errors = np.abs(estimates - truth)
     status = np.asarray(outputs["status"])
     columns = {
         "system": [spec.system] * count,
@@ -78,8 +96,10 @@ def realisation_frame(spec, cell, indices, outputs: dict) -> pd.DataFrame:
     }
     for j, name in enumerate(names):
         columns[name] = estimates[:, j]
-    for name in names:
-        columns[true_column(name)] = np.full(count, truth[name])
+    for j, name in enumerate(names):
+        columns[true_column(name)] = truth[:, j]
+    for name in TIMING_COLUMNS:
+        columns[name] = np.full(count, float(outputs.get(name, np.nan)))
     return pd.DataFrame(columns)
 
 
@@ -116,14 +136,22 @@ def summarise(table: pd.DataFrame) -> pd.DataFrame:
             "recovered_rate": recovered,
             "recovered_rate_se": recovered_se,
             "nrmse_median": float(np.median(group["nrmse"])) if count else float("nan"),
+            **_timing(group),
             **{f"count_{s.name}": int(np.sum(status == s.name)) for s in Status},
         }
         for name in names:
-            true = float(group[true_column(name)].iloc[0])
+            truths = group[true_column(name)].to_numpy(np.float64)
             estimate = used[name].to_numpy(np.float64)
-            error = estimate - true
             mean = float(np.mean(estimate)) if m else float("nan")
-            std = float(np.std(estimate, ddof=1)) if m > 1 else float("nan")
+            if np.all(truths == truths[0]):  # one system: the moments of the estimate
+                true = float(truths[0])
+                error = estimate - true
+                std = float(np.std(estimate, ddof=1)) if m > 1 else float("nan")
+            else:  # a family: moments of the error against each row's truth
+                true_used = used[true_column(name)].to_numpy(np.float64)
+                error = estimate - true_used
+                true = mean - float(np.mean(error)) if m else float("nan")
+                std = float(np.std(error, ddof=1)) if m > 1 else float("nan")
             rmse = float(np.sqrt(np.mean(error**2))) if m else float("nan")
             if m > 1 and rmse > 0:
                 rmse_se = float(np.std(error**2, ddof=1) / np.sqrt(m) / (2 * rmse))
@@ -147,6 +175,17 @@ def summarise(table: pd.DataFrame) -> pd.DataFrame:
                 }
             )
     return pd.DataFrame(rows)
+
+
+def _timing(group: pd.DataFrame) -> dict[str, float]:
+    if "fit_seconds" not in group or not len(group):
+        return {"fit_seconds_median": np.nan, "fit_seconds_mean": np.nan, "compile_seconds": np.nan}
+    seconds = group["fit_seconds"].to_numpy(np.float64)
+    return {
+        "fit_seconds_median": float(np.median(seconds)),
+        "fit_seconds_mean": float(np.mean(seconds)),
+        "compile_seconds": float(np.max(group["compile_seconds"].to_numpy(np.float64))),
+    }
 
 
 def read_summary(path) -> pd.DataFrame:
