@@ -1,0 +1,309 @@
+"""The model-error loop: fit, read the residual, add the effect it points to, repeat.
+
+1. Fit the declared cascade on the estimation record (robust estimator).
+2. Simulate it free-run on the validation record; test the residual (`_diagnose`).
+3. If every test passes, stop: nothing is invented.
+4. Otherwise refit the model with each effect of the library added (`_effects`), from
+   the current estimate, and score each on the validation record: its NRMSE, and a
+   paired test that its squared errors are smaller than the current model's.
+5. Among the significant candidates, those whose residual signature matches a failed
+   test rank first, then by validation NRMSE; the best is added. A coloured residual
+   that no deterministic effect explains, with the input tests passing, gets the
+   autoregressive noise model if its likelihood-ratio test is significant.
+6. Repeat from 2 while an effect was added (at most `max_effects`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._diagnose import ResidualTests, regime_from_switches, residual_tests
+from ._effects import EFFECTS, ExtendedModel, Start, plain, simulate_with_switches, whiten
+from ._model import CascadeParams, Orders
+from ._refine import from_unconstrained, least_squares, to_unconstrained
+from ._simulate import backlash_switches, shift
+
+
+@functools.partial(jax.jit, static_argnames=("effects", "orders", "max_steps"))
+def _refit(vectors, frees, fixeds, noise, u, y, *, effects, orders, max_steps):
+    """Output-error refit of one candidate structure from a batch of starts (`vmap`)."""
+    u_min, u_max = jnp.min(u), jnp.max(u)
+    size = orders.size
+
+    def unpack(z, fixed):
+        params = from_unconstrained(z[:size], orders, u_min, u_max)
+        free, start = [], size
+        for f in frees:
+            free.append(z[start : start + f.shape[-1]])
+            start += f.shape[-1]
+        return ExtendedModel(params, tuple(free), tuple(fixed), noise, effects)
+
+    def one(vector, free, fixed):
+        params = CascadeParams.from_vector(vector, orders, check=False)
+        z0 = jnp.concatenate([to_unconstrained(params, u_min, u_max), *free])
+
+        def residual(z, args):
+            return simulate_with_switches(unpack(z, fixed), u)[0] - y
+
+        z, cost, status, steps = least_squares(residual, z0, None, max_steps=max_steps)
+        return unpack(z, fixed), cost, status
+
+    return jax.vmap(one)(vectors, frees, fixeds)
+
+
+def refit(model: ExtendedModel, name: str, start: Start, u, y, max_steps: int = 150):
+    """Add effect `name` to `model` from the starts `start`; the best start wins (host side)."""
+    dtype = u.dtype
+    effects = model.effects + (name,)
+    count = start.vectors.shape[0]
+    frees = tuple(jnp.broadcast_to(jnp.asarray(f, dtype), (count,) + f.shape) for f in model.free)
+    fixeds = tuple(jnp.broadcast_to(jnp.asarray(f, dtype), (count,) + f.shape) for f in model.fixed)
+    frees += (jnp.asarray(start.free, dtype),)
+    fixeds += (jnp.asarray(start.fixed, dtype),)
+    models, costs, status = _refit(
+        jnp.asarray(start.vectors, dtype),
+        frees,
+        fixeds,
+        model.noise,
+        u,
+        y,
+        effects=effects,
+        orders=start.orders,
+        max_steps=max_steps,
+    )
+    costs = np.asarray(costs)
+    best = int(np.argmin(np.where(np.isfinite(costs), costs, np.inf)))
+    chosen = jax.tree_util.tree_map(lambda leaf: leaf[best], models)
+    return chosen, float(costs[best]), int(np.asarray(status)[best])
+
+
+@dataclasses.dataclass
+class Evaluation:
+    """A model on the validation record: residual, NRMSE and residual tests."""
+
+    residual: np.ndarray
+    simulated: np.ndarray
+    error: float
+    tests: ResidualTests
+
+
+def evaluate(model: ExtendedModel, u, y, sample_period: float = 1.0) -> Evaluation:
+    y_sim, x, y_cascade = (np.asarray(a) for a in simulate_with_switches(model, jnp.asarray(u)))
+    y = np.asarray(y)
+    residual = y - y_sim
+    p = model.params
+    g1, g2 = backlash_switches(
+        x, np.asarray(shift(jnp.asarray(y_cascade), 1)), float(p.cL), float(p.mR), float(p.cR)
+    )
+    regime = regime_from_switches(np.asarray(g1), np.asarray(g2))
+    innovations = np.asarray(whiten(model, jnp.asarray(residual)))
+    error = float(np.sqrt(np.mean(residual**2)) / np.std(y))
+    if not np.isfinite(error):
+        error = float("inf")
+    tests = residual_tests(u, innovations, regime, sample_period=sample_period)
+    return Evaluation(residual, y_sim, error, tests)
+
+
+def paired_improvement(current: np.ndarray, new: np.ndarray) -> float:
+    """t statistic that `new` has smaller squared errors than `current` (paired, with the
+    effective sample size corrected for lag-1 autocorrelation of the differences)."""
+    d = current**2 - new**2
+    n = len(d)
+    sd = np.std(d)
+    if not np.isfinite(sd) or sd == 0:
+        return 0.0 if np.mean(d) <= 0 else np.inf
+    dc = d - np.mean(d)
+    rho = float(np.clip(np.sum(dc[1:] * dc[:-1]) / np.sum(dc**2), -0.9, 0.99))
+    n_eff = n * (1 - rho) / (1 + rho)
+    return float(np.mean(d) / (sd / np.sqrt(n_eff)))
+
+
+@dataclasses.dataclass
+class Candidate:
+    round: int
+    name: str
+    label: str
+    error: float
+    t: float
+    significant: bool
+    signature_match: bool
+    model: ExtendedModel | None = None
+    evaluation: Evaluation | None = None
+
+    def to_dict(self) -> dict:
+        return {
+            "round": self.round,
+            "name": self.name,
+            "variant": self.label,
+            "error": self.error,
+            "t": self.t,
+            "significant": self.significant,
+            "signature_match": self.signature_match,
+        }
+
+
+@dataclasses.dataclass
+class LoopResult:
+    before: Evaluation
+    after: Evaluation
+    base: ExtendedModel
+    final: ExtendedModel
+    added: list[str]
+    candidates: list[Candidate]
+    noise_floor_hint: float | None = None
+
+    def to_dict(self) -> dict:
+        def params(model):
+            out = {"cascade": model.params.to_dict(), "orders": str(model.orders)}
+            for name, free, fixed in zip(model.effects, model.free, model.fixed, strict=True):
+                out[name] = {"free": np.asarray(free).tolist(), "fixed": np.asarray(fixed).tolist()}
+            if model.noise.shape[0]:
+                out["colored_noise"] = {"ar": np.asarray(model.noise).tolist()}
+            return out
+
+        return {
+            "error_before": self.before.error,
+            "error_after": self.after.error,
+            "effect_added": list(self.added),
+            "candidates": [
+                {"name": c.name, "error": c.error, **c.to_dict()} for c in self.candidates
+            ],
+            "residual_tests": {
+                "before": self.before.tests.to_dict(arrays=False),
+                "after": self.after.tests.to_dict(arrays=False),
+            },
+            "model_before": params(self.base),
+            "model_after": params(self.final),
+        }
+
+
+def model_error_loop(
+    u_est,
+    y_est,
+    u_val,
+    y_val,
+    orders: Orders,
+    *,
+    base: CascadeParams | None = None,
+    max_effects: int = 3,
+    t_threshold: float = 3.0,
+    min_gain: float = 0.02,
+    noise_alpha: float = 1e-3,
+    sample_period: float = 1.0,
+    effects: tuple[str, ...] | None = None,
+    progress=None,
+) -> LoopResult:
+    """Run the loop (module docstring) on an estimation and a validation record.
+
+    **Arguments:**
+
+    - `u_est`, `y_est`, `u_val`, `y_val`: 1-D arrays (model units).
+    - `orders`: declared orders of the cascade.
+    - `base`: a fitted cascade to start from; by default the robust estimator fits one.
+    - `t_threshold`, `min_gain`: a candidate is significant when its paired t statistic
+      exceeds `t_threshold` and it lowers the validation NRMSE by at least `min_gain`
+      (relative).
+    - `noise_alpha`: level of the likelihood-ratio test for the noise model.
+    - `effects`: names of the library to consider (default: all).
+    """
+    say = progress or (lambda message: None)
+    u_est, y_est = jnp.asarray(u_est), jnp.asarray(y_est, jnp.asarray(u_est).dtype)
+    u_val_np, y_val_np = np.asarray(u_val, float), np.asarray(y_val, float)
+    if base is None:
+        from ._estimator._robust import robust
+
+        say("fitting the declared cascade (robust estimator)")
+        base = jax.device_get(robust(u_est, y_est, orders).params)
+    model = plain(base)
+    current = evaluate(model, u_val_np, y_val_np, sample_period)
+    before = current
+    names = tuple(effects or EFFECTS)
+    added: list[str] = []
+    candidates: list[Candidate] = []
+    for round_ in range(1, max_effects + 1):
+        if current.tests.ok:
+            say(f"round {round_}: every residual test passes; nothing to add")
+            break
+        failed = set(current.tests.failed)
+        say(f"round {round_}: failed tests {sorted(failed)}; error {current.error:.4g}")
+        y_sim_est = np.asarray(simulate_with_switches(model, u_est)[0])
+        residual_est = np.asarray(y_est) - y_sim_est
+        round_candidates = []
+        for name in names:
+            effect = EFFECTS[name]
+            if name in added or effect.noise_model:
+                continue
+            best = None
+            for start in effect.starts(model, np.asarray(u_est), np.asarray(y_est), residual_est):
+                fitted, cost, status = refit(model, name, start, u_est, y_est)
+                if best is None or cost < best[1]:
+                    best = (fitted, cost, start.label)
+            fitted, _, label = best
+            evaluation = evaluate(fitted, u_val_np, y_val_np, sample_period)
+            t = paired_improvement(current.residual, evaluation.residual)
+            gain = 1 - evaluation.error / current.error
+            candidate = Candidate(
+                round_,
+                name,
+                label,
+                evaluation.error,
+                t,
+                bool(t > t_threshold and gain > min_gain),
+                bool(failed & set(effect.signature)),
+                fitted,
+                evaluation,
+            )
+            say(
+                f"  {label:<24} error {evaluation.error:.4g}  t {t:7.2f}  "
+                f"{'significant' if candidate.significant else ''}"
+            )
+            round_candidates.append(candidate)
+        noise = EFFECTS["colored_noise"]
+        if "colored_noise" in names and "colored_noise" not in added:
+            coefficients, p_value = noise.fit(current.residual)
+            noise_model = ExtendedModel(
+                model.params, model.free, model.fixed, jnp.asarray(coefficients), model.effects
+            )
+            evaluation = evaluate(noise_model, u_val_np, y_val_np, sample_period)
+            round_candidates.append(
+                Candidate(
+                    round_,
+                    "colored_noise",
+                    f"colored_noise:AR({len(coefficients)})",
+                    evaluation.error,
+                    0.0,
+                    bool(p_value < noise_alpha and len(coefficients)),
+                    bool(failed & set(noise.signature)),
+                    noise_model,
+                    evaluation,
+                )
+            )
+        candidates += round_candidates
+        deterministic = [c for c in round_candidates if c.significant and c.name != "colored_noise"]
+        if deterministic:
+            chosen = min(deterministic, key=lambda c: (not c.signature_match, c.error))
+        else:
+            # A coloured residual inflates the variance of its cross-correlation with the
+            # input, so the input tests are judged on the whitened residual.
+            noise_candidates = [
+                c
+                for c in round_candidates
+                if c.name == "colored_noise"
+                and c.significant
+                and c.signature_match
+                and c.evaluation.tests.whiteness_ok
+                and c.evaluation.tests.independence_ok
+            ]
+            if not noise_candidates:
+                say(f"round {round_}: no candidate explains the residual significantly; stop")
+                break
+            chosen = noise_candidates[0]
+        say(f"round {round_}: adding {chosen.label} (error {chosen.error:.4g})")
+        added.append(chosen.name)
+        model, current = chosen.model, chosen.evaluation
+    return LoopResult(before, current, plain(base), model, added, candidates)
