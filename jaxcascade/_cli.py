@@ -17,6 +17,7 @@ _SUBCOMMANDS = [
     "jaxcascade._reproduce",
     "jaxcascade._montecarlo",
     "jaxcascade._fit",
+    "jaxcascade._report",
     "jaxcascade._bench",
 ]
 

@@ -1,0 +1,63 @@
+"""Linear ARX model: the simplest peer the cascade is compared with on measured data.
+
+`A(q) y(t) = B(q) u(t) + c + e(t)` with `A = 1 + a1 q^-1 + ... + a_na q^-na` and
+`B = b1 q^-1 + ... + b_nb q^-nb`, fitted by least squares on the one-step equation error;
+the orders are chosen by the free-run simulation error on the estimation record
+(host side, numpy/scipy).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import scipy.signal
+
+
+@dataclasses.dataclass(frozen=True)
+class ARX:
+    a: np.ndarray  # (na,)
+    b: np.ndarray  # (nb,)
+    c: float
+
+    def simulate(self, u) -> np.ndarray:
+        """Free-run simulation from rest."""
+        u = np.asarray(u, float)
+        den = np.concatenate([[1.0], self.a])
+        num = np.concatenate([[0.0], self.b])
+        return scipy.signal.lfilter(num, den, u) + scipy.signal.lfilter(
+            [self.c], den, np.ones_like(u)
+        )
+
+    @property
+    def orders(self) -> tuple[int, int]:
+        return len(self.a), len(self.b)
+
+
+def fit_arx(u, y, na: int, nb: int) -> ARX:
+    """Least-squares ARX fit of orders `(na, nb)` with a constant term."""
+    u, y = np.asarray(u, float), np.asarray(y, float)
+    start = max(na, nb)
+    rows = len(y) - start
+    columns = [-y[start - i : start - i + rows] for i in range(1, na + 1)]
+    columns += [u[start - j : start - j + rows] for j in range(1, nb + 1)]
+    columns.append(np.ones(rows))
+    theta, *_ = np.linalg.lstsq(np.stack(columns, axis=1), y[start:], rcond=None)
+    return ARX(theta[:na], theta[na : na + nb], float(theta[-1]))
+
+
+def best_arx(u, y, max_order: int = 4) -> ARX:
+    """The ARX orders up to `max_order` with the lowest free-run error on `(u, y)`,
+    among the stable fits."""
+    best, best_error = None, np.inf
+    for na in range(1, max_order + 1):
+        for nb in range(1, max_order + 1):
+            model = fit_arx(u, y, na, nb)
+            if np.any(np.abs(np.roots(np.concatenate([[1.0], model.a]))) >= 1):
+                continue
+            error = np.mean((y - model.simulate(u)) ** 2)
+            if error < best_error:
+                best, best_error = model, error
+    if best is None:
+        raise ValueError("No stable ARX model up to order 4 fits this record.")
+    return best

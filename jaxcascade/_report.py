@@ -1,0 +1,202 @@
+"""`jaxcascade loop`: the model-error loop on measured records, with its report.
+
+The report (`--report DIR`) holds `report.json` (what `--json` prints, plus the
+models and the ARX peer), `report.md`, `candidates.csv`, the measured versus simulated
+validation output before and after (`compare.png`), and the residual tests before and
+after (`residual_before_*.png`, `residual_after_*.png`).
+"""
+
+from __future__ import annotations
+
+import json
+import pathlib
+import sys
+
+import numpy as np
+
+from ._arx import best_arx
+from ._data import read_record
+from ._metrics import fit_percent, nrmse
+from ._model import Orders
+
+
+def plot_compare(time, y, before, after, path, *, arx=None, title="") -> None:
+    """Measured versus simulated validation output, before and after the loop."""
+    from matplotlib.figure import Figure
+
+    figure = Figure(figsize=(12, 6.5), layout="constrained")
+    axes = figure.subplots(2, 1, sharex=True)
+    for ax, (label, simulated) in zip(axes, (("before", before), ("after", after)), strict=True):
+        ax.plot(time, y, color="0.3", lw=0.8, label="measured")
+        ax.plot(
+            time,
+            simulated,
+            lw=0.8,
+            label=f"cascade {label} ({fit_percent(nrmse(y, simulated)):.1f} % fit)",
+        )
+        if arx is not None:
+            ax.plot(
+                time, arx, lw=0.6, ls="--", label=f"ARX ({fit_percent(nrmse(y, arx)):.1f} % fit)"
+            )
+        ax.legend(loc="upper right", fontsize=8)
+        ax.set_ylabel("output")
+    axes[-1].set_xlabel("time" if time is not None else "sample")
+    figure.suptitle(title)
+    figure.savefig(path, dpi=110)
+
+
+def _markdown(report: dict, command: str) -> str:
+    lines = [
+        "# Model-error loop report",
+        "",
+        f"Command: `{command}`",
+        "",
+        f"- validation NRMSE before: {report['error_before']:.4f} "
+        f"(fit {fit_percent(report['error_before']):.1f} %)",
+        f"- validation NRMSE after: {report['error_after']:.4f} "
+        f"(fit {fit_percent(report['error_after']):.1f} %)",
+        f"- effects added: {', '.join(report['effect_added']) or 'none'}",
+    ]
+    if "arx" in report:
+        arx = report["arx"]
+        lines.append(
+            f"- linear ARX peer (na={arx['na']}, nb={arx['nb']}): NRMSE {arx['error']:.4f} "
+            f"(fit {fit_percent(arx['error']):.1f} %)"
+        )
+    lines += [
+        "",
+        "## Candidates",
+        "",
+        "| round | effect | variant | NRMSE | paired t | significant | signature matches |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for c in report["candidates"]:
+        lines.append(
+            f"| {c['round']} | {c['name']} | {c['variant']} | {c['error']:.4f} | {c['t']:.2f} | "
+            f"{c['significant']} | {c['signature_match']} |"
+        )
+    lines += [
+        "",
+        "## Residual tests (p-values; pass at p >= 0.05)",
+        "",
+        "| test | before | after |",
+        "|---|---|---|",
+    ]
+    before = report["residual_tests"]["before"]
+    after = report["residual_tests"]["after"]
+    for name, test in before.items():
+        if isinstance(test, dict):
+            lines.append(f"| {name} | {_p(test)} | {_p(after.get(name))} |")
+    lines.append(f"| all tests pass | {before['ok']} | {after['ok']} |")
+    return "\n".join(lines) + "\n"
+
+
+def _p(test) -> str:
+    if not test:
+        return "-"
+    p = test.get("p_value")
+    mark = "pass" if test.get("passed") else "FAIL"
+    return f"{p:.3g} {mark}" if p is not None else mark
+
+
+def run_loop(args) -> int:
+    from ._cli import CLIError, writable_folder
+    from ._diagnose_plot import save_residual_figures
+    from ._loop import model_error_loop
+
+    try:
+        orders = Orders.parse(args.orders)
+    except ValueError as error:
+        raise CLIError(f"--orders: {error}") from None
+    if args.max_effects < 0:
+        raise CLIError(f"--max-effects must be >= 0, got {args.max_effects}.")
+    options = dict(time_column=args.time, decimate=args.decimate, orders=orders)
+    estimation = read_record(args.train, args.input, args.output, scaling=args.scaling, **options)
+    validation = read_record(
+        args.validate, args.input, args.output, scaling=estimation.scaling, **options
+    )
+    if args.report:
+        writable_folder(args.report)
+
+    def say(message):
+        if not args.quiet:
+            print(message, file=sys.stderr, flush=True)
+
+    result = model_error_loop(
+        estimation.u,
+        estimation.y,
+        validation.u,
+        validation.y,
+        orders,
+        max_effects=args.max_effects,
+        sample_period=validation.sample_period or 1.0,
+        progress=say,
+    )
+    full = result.to_dict()
+    arx = best_arx(estimation.u, estimation.y)
+    arx_val = arx.simulate(validation.u)
+    full["arx"] = {
+        "na": arx.orders[0],
+        "nb": arx.orders[1],
+        "error": float(nrmse(validation.y, arx_val)),
+    }
+    full["records"] = {"estimation": estimation.to_dict(), "validation": validation.to_dict()}
+    keys = ("error_before", "error_after", "effect_added", "candidates", "residual_tests")
+    if args.json:
+        print(json.dumps({key: full[key] for key in keys}))
+    else:
+        print(
+            f"validation NRMSE before {full['error_before']:.4f}, after "
+            f"{full['error_after']:.4f}; added: {', '.join(full['effect_added']) or 'none'}; "
+            f"ARX peer {full['arx']['error']:.4f}"
+        )
+    if args.report:
+        folder = pathlib.Path(args.report)
+        command = (
+            "jaxcascade loop " + " ".join(sys.argv[2:])
+            if args.command_line is None
+            else (args.command_line)
+        )
+        (folder / "report.json").write_text(json.dumps(full, indent=1))
+        (folder / "report.md").write_text(_markdown(full, command))
+        import pandas as pd
+
+        pd.DataFrame(full["candidates"]).to_csv(folder / "candidates.csv", index=False)
+        period = validation.sample_period
+        time = np.arange(len(validation)) * (period or 1.0)
+        plot_compare(
+            time,
+            validation.y,
+            result.before.simulated,
+            result.after.simulated,
+            folder / "compare.png",
+            arx=arx_val,
+            title="validation record (model units): measured vs free-run simulation",
+        )
+        save_residual_figures(result.before.tests, folder, prefix="residual_before_")
+        save_residual_figures(result.after.tests, folder, prefix="residual_after_")
+    return 0
+
+
+def add_parser(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "loop", help="fit, test the residual, add the missing effect, report before/after"
+    )
+    parser.add_argument("train", help="estimation record (CSV or Parquet)")
+    parser.add_argument("--validate", required=True, help="validation record")
+    parser.add_argument("--input", required=True, help="input column")
+    parser.add_argument("--output", required=True, help="output column")
+    parser.add_argument("--time", default=None, help="optional time column")
+    parser.add_argument("--orders", default="2,2,2,2", help="declared nR,nL,r,p")
+    parser.add_argument("--decimate", type=int, default=1, help="anti-aliased decimation factor")
+    parser.add_argument(
+        "--scaling",
+        default="scale",
+        choices=("none", "scale", "standard"),
+        help="units the model is fitted in (default: divide by the estimation std)",
+    )
+    parser.add_argument("--max-effects", type=int, default=3)
+    parser.add_argument("--report", default=None, help="folder for the report and figures")
+    parser.add_argument("--json", action="store_true", help="print the JSON summary")
+    parser.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    parser.set_defaults(func=run_loop, command_line=None)
