@@ -92,7 +92,7 @@ def voros_step(params: CascadeParams, u, y):
     v = pwl(params, u)
     x = linear_block(params, v)
     reg = regression(params, u, y, v, x)
-    theta, singular, cost = solve_normal_equations(reg.phi, reg.yc)
+    theta, singular, cost = solve_normal_equations(reg.phi, reg.yc, blocks=params.orders.size - 2)
     new = CascadeParams.from_theta(theta, params.orders, check=False)
     return new.to_vector(), singular, cost
 
