@@ -71,11 +71,13 @@ def device_description() -> str:
     return f"cpu: {model} ({cores} cores)"
 
 
-def batched_fit(example_number: int, n: int, iterations: int, dtype=None):
-    """The jitted batched workload `(keys, params) -> (estimates, statuses)`."""
+def batched_fit(example_number: int, n: int, iterations: int, dtype=None, micro_batch: int = 16):
+    """The jitted batched workload `(keys, params) -> (estimates, statuses)`, as `vmap`
+    over micro-batches of `micro_batch` realisations (`_batching.chunked_vmap`)."""
     import jax
     import jax.numpy as jnp
 
+    from ._batching import chunked_vmap
     from ._estimate import voros
     from ._simulate import measure, uniform_input
 
@@ -89,7 +91,7 @@ def batched_fit(example_number: int, n: int, iterations: int, dtype=None):
         solution = voros(u, y, ex.orders, max_iterations=iterations, tol=-1.0)
         return solution.params.to_vector(), solution.status
 
-    return jax.jit(jax.vmap(one, in_axes=(0, None)))
+    return jax.jit(chunked_vmap(one, micro_batch, in_axes=(0, None)))
 
 
 def run_jax(realisations: int, n: int, iterations: int, example_number=1, repeats=3, seed=0):
