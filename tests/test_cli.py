@@ -1,0 +1,103 @@
+"""The command line: results on good input, one-line errors (exit 2) on bad input."""
+
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from jaxcascade._cli import main
+
+
+def _one_line_error(capsys, argv):
+    code = main(argv)
+    err = capsys.readouterr().err.strip()
+    assert code == 2
+    assert len(err.splitlines()) == 1, err
+    assert err.startswith("jaxcascade: error: ")
+    assert "Traceback" not in err
+    return err
+
+
+@pytest.mark.parametrize(
+    "argv, words",
+    [
+        (["reproduce", "--example", "3"], "unknown example"),
+        (["reproduce", "--example", "1", "--snr", "0"], "--snr must be positive"),
+        (["reproduce", "--example", "1", "--snr", "-5"], "--snr must be positive"),
+        (["reproduce", "--example", "1", "--snr", "abc"], "invalid float"),
+        (["reproduce"], "required"),
+        (["reproduce", "--example", "1", "--out", "/proc/forbidden"], "cannot write"),
+        (["nonsense"], "invalid choice"),
+        (["fit", "missing.csv", "--input", "u", "--output", "y"], "does not exist"),
+        (["fit", "x.csv", "--input", "u", "--output", "y", "--orders", "2,2"], "--orders"),
+        (["fit", "x.csv", "--input", "u", "--output", "y", "--estimator", "magic"], "magic"),
+    ],
+)
+def test_bad_input_is_one_line_exit_2(capsys, argv, words):
+    assert words in _one_line_error(capsys, argv)
+
+
+def test_unwritable_output_writes_nothing(capsys, tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("not a folder")
+    _one_line_error(capsys, ["reproduce", "--example", "1", "--out", str(blocker / "sub")])
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["file"]
+
+
+def test_fit_missing_column_names_the_columns(capsys, tmp_path):
+    path = tmp_path / "data.csv"
+    pd.DataFrame({"u": np.linspace(-1, 1, 200), "y": np.zeros(200)}).to_csv(path, index=False)
+    err = _one_line_error(capsys, ["fit", str(path), "--input", "u", "--output", "force"])
+    assert "'force'" in err and "'y'" in err
+
+
+def test_reproduce_json_and_files(capsys, tmp_path):
+    assert (
+        main(["reproduce", "--example", "1", "--snr", "inf", "--out", str(tmp_path), "--json"]) == 0
+    )
+    result = json.loads(capsys.readouterr().out)
+    assert result["example"] == 1 and result["status"] == "converged"
+    assert set(result) == {"example", "iterations", "status", "estimates", "true"}
+    # Noise-free Example 1: the paper's iteration recovers every parameter.
+    for name, value in result["true"].items():
+        assert abs(result["estimates"][name] - value) < 1e-8, name
+    names = {p.name for p in tmp_path.iterdir()}
+    assert {"example1_snrinf_seed0_estimates.csv", "example1_snrinf_seed0_convergence.png"} <= names
+
+
+def test_fit_json_on_a_simulated_record(capsys, tmp_path):
+    import jax
+
+    import jaxcascade as jc
+
+    ex = jc.example(1)
+    key_u, key_e = jax.random.split(jax.random.PRNGKey(0))
+    u = jc.uniform_input(key_u, 1500)
+    y, _ = jc.measure(key_e, ex.params(), u, 50.0)
+    path = tmp_path / "record.csv"
+    pd.DataFrame({"u": np.asarray(u), "y": np.asarray(y)}).to_csv(path, index=False)
+    assert main(["fit", str(path), "--input", "u", "--output", "y", "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert set(result) == {"estimator", "status", "estimates", "nrmse", "iterations"}
+    assert result["estimator"] == "robust" and result["status"] == "converged"
+    # SNR 50: the noise floor of the NRMSE is 1/50; a correct fit sits near it.
+    assert result["nrmse"] < 1.3 / 50
+    truth = ex.params().to_dict()
+    assert max(abs(result["estimates"][k] - v) for k, v in truth.items()) < 0.05
+
+
+def test_no_traceback_from_the_installed_entry_point(tmp_path):
+    env = {**os.environ, "JAX_PLATFORMS": "cpu"}
+    run = subprocess.run(
+        [sys.executable, "-m", "jaxcascade", "reproduce", "--example", "7"],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=120,
+    )
+    assert run.returncode == 2
+    assert run.stderr.strip().count("\n") == 0 and "Traceback" not in run.stderr
