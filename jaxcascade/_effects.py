@@ -63,7 +63,7 @@ def simulate_with_switches(model: ExtendedModel, u):
     inner = signals(model.params, u)
     y = inner.y
     for name, free, fixed in zip(model.effects, model.free, model.fixed, strict=True):
-        y = EFFECTS[name].output(y, free, fixed)
+        y = EFFECTS[name].output(y, free, fixed, inner.x)
     return y, inner.x, inner.y
 
 
@@ -100,7 +100,7 @@ class Effect:
     def input(self, u, free, fixed):
         return u
 
-    def output(self, y, free, fixed):
+    def output(self, y, free, fixed, x):
         return y
 
     def starts(self, model: ExtendedModel, u, y, residual) -> list[Start]:
@@ -118,7 +118,7 @@ class OutputOffset(Effect):
     signature = ("mean",)
     description = "constant offset added to the output: y + d"
 
-    def output(self, y, free, fixed):
+    def output(self, y, free, fixed, x):
         return y + free[0]
 
     def initial(self, u, y, residual):
@@ -130,7 +130,7 @@ class OutputDrift(Effect):
     signature = ("time",)
     description = "linear drift of the output over the record: y + d t / 1000 (t in samples)"
 
-    def output(self, y, free, fixed):
+    def output(self, y, free, fixed, x):
         return y + free[0] * jnp.arange(y.shape[0], dtype=y.dtype) / 1000.0
 
     def initial(self, u, y, residual):
@@ -144,11 +144,34 @@ class OutputSaturation(Effect):
     signature = ("level", "regime", "u2_e", "u2_e2", "mean")
     description = "output clipped to [lower, upper] (a sensor or actuator limit)"
 
-    def output(self, y, free, fixed):
+    def output(self, y, free, fixed, x):
         return jnp.clip(y, free[0], free[1])
 
     def initial(self, u, y, residual):
         return np.quantile(y, [0.005, 0.995]), np.zeros(0)
+
+
+class OutputFeedthrough(Effect):
+    """A parallel linear path from the linear block's output to the measured output.
+
+    With `d = -1` and `mR = 1` the output `y - x` is minus the *stop* operator of `x`
+    (elastic-plastic, or Coulomb friction with stiffness): the force of a friction
+    element, where the cascade alone gives the *play* (the slack position).
+    """
+
+    name = "output_feedthrough"
+    signature = ("cross_correlation", "level", "regime", "u2_e")
+    description = "parallel linear path from x to the output: y + d x"
+
+    def output(self, y, free, fixed, x):
+        return y + free[0] * x
+
+    def starts(self, model, u, y, residual):
+        vector = np.asarray(model.params.to_vector())
+        free = np.array([[-1.0], [-0.5], [0.5]])
+        return [
+            Start(self.name, model.orders, np.repeat(vector[None], 3, 0), free, np.zeros((3, 0)))
+        ]
 
 
 class InputDelay(Effect):
@@ -292,5 +315,6 @@ EFFECTS: dict[str, Effect] = {
         OutputSaturation(),
         ColoredNoise(),
         OutputDrift(),
+        OutputFeedthrough(),
     )
 }

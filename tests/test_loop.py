@@ -49,6 +49,7 @@ CASES = {
     "output_saturation": lambda: _with("output_saturation", [-0.7, 0.9]),
     "colored_noise": lambda: plain(TRUTH()),
     "output_drift": lambda: _with("output_drift", [0.2]),
+    "output_feedthrough": lambda: _with("output_feedthrough", [-0.5]),
     None: lambda: plain(TRUTH()),
 }
 
