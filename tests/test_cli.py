@@ -101,3 +101,25 @@ def test_no_traceback_from_the_installed_entry_point(tmp_path):
     )
     assert run.returncode == 2
     assert run.stderr.strip().count("\n") == 0 and "Traceback" not in run.stderr
+
+
+BRFD = os.path.join(os.path.dirname(__file__), "..", "..", "shared", "data", "brfd")
+
+
+@pytest.mark.skipif(
+    not os.path.isdir(BRFD),
+    reason="the measured BRFD records live in ../shared/data/brfd, absent on this machine",
+)
+def test_loop_runs_on_the_measured_friction_damper(capsys, tmp_path):
+    data = os.path.join(BRFD, "earthquake_kocaeli_dbe.csv")
+    valid = os.path.join(BRFD, "earthquake_imperialvalley_dbe.csv")
+    argv = ["loop", data, "--validate", valid, "--input", "displacement_in"]
+    argv += ["--output", "force_kip", "--time", "time_s", "--decimate", "32", "--max-effects", "1"]
+    argv += ["--json", "--quiet", "--report", str(tmp_path)]
+    assert main(argv) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert np.isfinite(result["error_before"]) and np.isfinite(result["error_after"])
+    # The loop only adds an effect that lowers the validation error.
+    assert result["error_after"] <= result["error_before"]
+    assert len(result["effect_added"]) <= 1
+    assert {"report.json", "report.md", "compare.png"} <= {p.name for p in tmp_path.iterdir()}
