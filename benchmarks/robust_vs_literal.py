@@ -1,6 +1,6 @@
 """Issue 4: the literal Vörös iteration versus the robust estimator, on one grid.
 
-    python benchmarks/robust_vs_literal.py [--realisations 500]
+    python benchmarks/robust_vs_literal.py [--realisations 200]
         [--out results/robust_vs_literal] [--estimators literal,robust]
         [--n N] [--chunk-size 64] [--seed 0] [--scheduler tcp://HOST:PORT]
 
@@ -126,7 +126,7 @@ def markdown(table, header: str) -> str:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--realisations", type=int, default=500, help="per cell (500)")
+    parser.add_argument("--realisations", type=int, default=200, help="per cell (200)")
     parser.add_argument("--out", default="results/robust_vs_literal", help="output stem")
     parser.add_argument("--estimators", default="literal,robust")
     parser.add_argument("--n", type=int, help="replace every system's N (quick checks only)")

@@ -331,6 +331,9 @@ def run(
     finishes, and merged into `out` (with metadata) at the end. If `OUT.partial/` exists
     the run continues it (its spec and dtype must match); an existing complete `out` is
     an error unless `resume`, which reuses it. `progress=None` shows a bar on a terminal.
+
+    With `spec.scheduler` the chunks run on that Dask cluster (`_distributed`), arriving
+    in any order; the table is the same as in this process.
     """
     from tqdm.auto import tqdm
 
@@ -340,8 +343,8 @@ def run(
         chunks = list(_chunks(spec, None))
         with tqdm(total=total, unit="realisation", disable=_disable(progress)) as bar:
             frames = []
-            for cell, indices in chunks:
-                frames.append(run_chunk(spec, cell, indices))
+            for _, indices, frame in _results(spec, chunks, dtype):
+                frames.append(frame)
                 bar.update(len(indices))
         return _ordered(spec, pd.concat(frames, ignore_index=True))
 
@@ -370,8 +373,7 @@ def run(
     done = _done(folder)
     initial = 0 if done is None else len(done)
     with tqdm(total=total, initial=initial, unit="realisation", disable=_disable(progress)) as bar:
-        for cell, indices in _chunks(spec, done):
-            frame = run_chunk(spec, cell, indices)
+        for cell, indices, frame in _results(spec, list(_chunks(spec, done)), dtype):
             # repr(snr) is exact, so two SNRs never share a file name.
             name = f"chunk-n{cell.n}-snr{cell.snr!r}-{cell.estimator}-{indices[0]:09d}.parquet"
             write_table(frame, folder / name, {})
@@ -385,10 +387,19 @@ def run(
     return pd.read_parquet(out)
 
 
+def _results(spec: Spec, chunks: list, dtype):
+    """`(cell, indices, frame)` for every chunk, in this process or on the Dask cluster."""
+    if spec.scheduler is None:
+        return ((cell, indices, run_chunk(spec, cell, indices)) for cell, indices in chunks)
+    from ._distributed import distributed_chunks  # imports dask only when asked for
+
+    return distributed_chunks(spec, chunks, dtype)
+
+
 def _without_chunk(spec_dict):
     if not isinstance(spec_dict, dict):
         return spec_dict
-    return {k: v for k, v in spec_dict.items() if k != "chunk_size"}
+    return {k: v for k, v in spec_dict.items() if k not in ("chunk_size", "scheduler")}
 
 
 def _disable(progress):
@@ -461,6 +472,7 @@ def spec_from_args(args) -> Spec:
         ("seed", args.seed),
         ("estimators", args.estimator),
         ("chunk_size", args.chunk_size),
+        ("scheduler", args.scheduler),
     ):
         if value is not None:
             data[field] = value
@@ -547,6 +559,12 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--estimator", type=_names, help="e.g. literal or literal,robust")
     parser.add_argument("--amplitude", type=float, help="input uniform in (-A, A) (default 2)")
     parser.add_argument("--chunk-size", type=int, help="realisations per compiled batch")
+    parser.add_argument(
+        "--scheduler",
+        metavar="tcp://HOST:PORT",
+        help="run the chunks on this Dask scheduler's workers (pip install "
+        "'jaxcascade[distributed]'); the default runs them in this process",
+    )
     parser.add_argument("--out", help="results/NAME.parquet (default results/SPEC.parquet)")
     parser.add_argument(
         "--resume", action="store_true", help="reuse a finished OUT (a killed run continues anyway)"

@@ -15,6 +15,7 @@ TOML layout (every key optional except the system):
     seed = 0
     estimators = ["literal"]
     chunk_size = 64
+    scheduler = "tcp://HOST:8786"    # optional: run the chunks on a Dask cluster
 
     [input]
     distribution = "uniform"         # u uniform in (-amplitude, amplitude)
@@ -65,6 +66,7 @@ _TOP_LEVEL = (
     "estimators",
     "estimator",
     "chunk_size",
+    "scheduler",
 )
 
 
@@ -123,6 +125,10 @@ class Spec:
     - `estimators`: names in `ESTIMATORS`; `settings`: `{name: {setting: value}}`.
     - `chunk_size`: realisations per jit-compiled batch; it bounds peak memory and
       never changes a result.
+    - `scheduler`: address of a Dask scheduler (`tcp://HOST:PORT`) to run the chunks on,
+      or `None` to run them in this process. Like `chunk_size` it is how the sweep runs,
+      not what it computes: it never changes a result, and it is left out of the
+      identity that a resumed run must match.
     """
 
     example: int | None = None
@@ -138,6 +144,7 @@ class Spec:
     estimators: tuple[str, ...] = ("literal",)
     settings: Mapping[str, Mapping[str, Any]] = dataclasses.field(default_factory=dict)
     chunk_size: int = 64
+    scheduler: str | None = None
 
     def __post_init__(self):
         set_ = object.__setattr__
@@ -163,7 +170,8 @@ class Spec:
                     f"{' and '.join(map(str, EXAMPLES))}."
                 )
             ex = EXAMPLES[self.example]
-            if self.orders is not None:
+            orders = Orders.parse(self.orders) if isinstance(self.orders, str) else self.orders
+            if orders is not None and orders != ex.orders:  # equal ones: dataclasses.replace
                 raise ValueError("A spec with an example takes its orders from the example.")
             set_(self, "orders", ex.orders)
             set_(self, "n", self.n if self.n is not None else ex.n_samples)
@@ -213,6 +221,12 @@ class Spec:
                 )
         if self.seed >= 2**32:
             raise ValueError(f"Seed must be below 2**32, got {self.seed}.")
+        if self.scheduler is not None and not (
+            isinstance(self.scheduler, str) and ":" in self.scheduler.strip()
+        ):
+            raise ValueError(
+                f"Scheduler must be an address like tcp://HOST:8786, got {self.scheduler!r}."
+            )
 
         for name in self.estimators:
             estimator(name)
@@ -276,7 +290,11 @@ class Spec:
     # ---- (de)serialisation -----------------------------------------------------------
 
     def to_dict(self, *, chunk_size: bool = True) -> dict:
-        """The spec in its TOML layout (JSON-serialisable; `from_dict` inverts it)."""
+        """The spec in its TOML layout (JSON-serialisable; `from_dict` inverts it).
+
+        `chunk_size=False` leaves out how the sweep runs (`chunk_size`, `scheduler`):
+        what remains is the experiment's identity, which a resumed run must match.
+        """
         out: dict[str, Any] = {}
         if self.example is not None:
             out["example"] = self.example
@@ -297,6 +315,8 @@ class Spec:
             }
         if chunk_size:
             out["chunk_size"] = self.chunk_size
+            if self.scheduler is not None:
+                out["scheduler"] = self.scheduler
         return out
 
     def to_json(self, *, chunk_size: bool = True) -> str:
@@ -311,7 +331,16 @@ class Spec:
                 f"Unknown spec field {unknown[0]!r}; known fields: {', '.join(_TOP_LEVEL)}."
             )
         kwargs: dict[str, Any] = {}
-        for key in ("example", "n", "snr", "realisations", "seed", "estimators", "chunk_size"):
+        for key in (
+            "example",
+            "n",
+            "snr",
+            "realisations",
+            "seed",
+            "estimators",
+            "chunk_size",
+            "scheduler",
+        ):
             if key in data:
                 kwargs[key] = data[key]
         if "system" in data:
