@@ -16,7 +16,14 @@ import pytest
 import scipy.signal
 
 import jaxcascade as jc
-from jaxcascade._effects import EFFECTS, ExtendedModel, plain, simulate_extended, whiten
+from jaxcascade._effects import (
+    EFFECTS,
+    UNDECLARED,
+    ExtendedModel,
+    simulate_extended,
+    undeclared_record,
+    whiten,
+)
 from jaxcascade._loop import model_error_loop, paired_improvement
 
 SNR = 20.0
@@ -24,53 +31,11 @@ N = 2000
 TRUTH = jc.example(1).params
 
 
-def _with(name, free, fixed=()):
-    return ExtendedModel(
-        TRUTH(), (jnp.asarray(free, float),), (jnp.asarray(fixed, float),), jnp.zeros(0), (name,)
-    )
-
-
-def _changed(**values):
-    v = TRUTH().to_dict()
-    v.update(values)
-    return plain(jc.CascadeParams.from_dict(v))
-
-
-def _extra_pole():
-    b = np.real(np.poly([0.5, 0.3 + 0.4j, 0.3 - 0.4j]))[1:]
-    return _changed(b1=b[0], b2=b[1], b3=b[2])
-
-
-CASES = {
-    "output_offset": lambda: _with("output_offset", [0.6]),
-    "input_delay": lambda: _with("input_delay", [], [2]),
-    "dynamics_order": _extra_pole,
-    "pwl_segment": lambda: _changed(DR2=1.5, MR3=1.5),
-    "output_saturation": lambda: _with("output_saturation", [-0.7, 0.9]),
-    "colored_noise": lambda: plain(TRUTH()),
-    "output_drift": lambda: _with("output_drift", [0.2]),
-    "output_feedthrough": lambda: _with("output_feedthrough", [-0.5]),
-    None: lambda: plain(TRUTH()),
-}
-
-
-def _record(model, key, ar=None):
-    k_input, k_noise = jax.random.split(key)
-    u = jc.uniform_input(k_input, N)
-    y = simulate_extended(model, u)
-    e = np.asarray(jax.random.normal(k_noise, (N,)))
-    if ar is not None:
-        e = scipy.signal.lfilter([1.0], [1.0, -ar], e)
-    e = e / np.std(e) * float(jnp.std(y)) / SNR
-    return u, y + e
-
-
-@pytest.mark.parametrize("effect", list(CASES), ids=lambda e: str(e))
+@pytest.mark.parametrize("effect", list(UNDECLARED), ids=lambda e: str(e))
 def test_loop_names_the_undeclared_effect(effect):
-    model = CASES[effect]()
-    ar = 0.8 if effect == "colored_noise" else None
-    u, y = _record(model, jax.random.PRNGKey(1), ar)
-    u_val, y_val = _record(model, jax.random.PRNGKey(2), ar)
+    model, ar = UNDECLARED[effect]()
+    u, y = undeclared_record(model, jax.random.PRNGKey(1), N, SNR, ar)
+    u_val, y_val = undeclared_record(model, jax.random.PRNGKey(2), N, SNR, ar)
     result = model_error_loop(u, y, u_val, y_val, jc.Orders())
     expected = [] if effect is None else [effect]
     assert result.added == expected
@@ -111,7 +76,8 @@ def test_offset_within_the_gaps_is_a_gap_change():
     shifted = jc.simulate(jc.CascadeParams.from_dict(v), u)
     # Both backlash states start at y = 0, so compare after the first move has
     # settled the state on a line.
-    with_offset = simulate_extended(_with("output_offset", [d]), u)
+    offset = ExtendedModel(p, (jnp.array([d]),), (jnp.zeros(0),), jnp.zeros(0), ("output_offset",))
+    with_offset = simulate_extended(offset, u)
     start = int(np.argmax(np.abs(np.diff(np.asarray(shifted))) > 0)) + 5
     np.testing.assert_allclose(shifted[start:], with_offset[start:], atol=1e-12)
 
@@ -129,3 +95,7 @@ def test_paired_improvement_sign():
     assert paired_improvement(noise + 0.5, noise) > 10
     assert paired_improvement(noise, noise + 0.5) < -10
     assert abs(paired_improvement(noise, rng.normal(size=2000))) < 4
+
+
+def test_every_effect_of_the_library_has_an_undeclared_record():
+    assert set(EFFECTS) == {name for name in UNDECLARED if name is not None}
