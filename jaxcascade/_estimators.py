@@ -22,6 +22,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from ._estimate import Solution, initial_guess, voros
+from ._estimator._robust import robust
 from ._model import Orders
 
 # Keyword arguments the engine supplies itself; never user settings.
@@ -60,18 +61,7 @@ def literal(
     )
 
 
-ESTIMATORS: dict[str, Callable[..., Solution]] = {"literal": literal}
-
-
-def _register_robust() -> None:
-    try:
-        from ._estimator._robust import robust
-    except ImportError:  # the robust estimator is optional here
-        return
-    ESTIMATORS.setdefault("robust", robust)
-
-
-_register_robust()
+ESTIMATORS: dict[str, Callable[..., Solution]] = {"literal": literal, "robust": robust}
 
 
 def estimator(name: str) -> Callable[..., Solution]:

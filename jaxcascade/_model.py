@@ -240,21 +240,26 @@ def _infer_orders(values: Mapping[str, float]) -> Orders:
     return Orders(nR=max(nR, 1), nL=max(nL, 1), r=r, p=p)
 
 
-def is_stable(b: Float[Array, " p"]) -> Array:
-    """Whether `1 + b1 q^-1 + ... + bp q^-p` has all roots inside the unit circle.
-
-    Schur-Cohn step-down recursion (reflection coefficients), traceable and cheap for the
-    small orders used here.
+def reflection_coefficients(b: Float[Array, " p"]) -> Float[Array, " p"]:
+    """Reflection coefficients `k_1..k_p` of `1 + b1 q^-1 + ... + bp q^-p` (Schur-Cohn
+    step-down recursion); the polynomial is stable iff every `|k_i| < 1`. Traceable; a
+    step with `|k| >= 1` is guarded so no NaN appears (the result then flags instability).
     """
     p = b.shape[-1]
-    stable = jnp.asarray(True)
     poly = jnp.concatenate([jnp.ones((1,), b.dtype), b])
+    ks = []
     for m in range(p, 0, -1):
         k = poly[m]
-        stable = stable & (jnp.abs(k) < 1)
+        ks.append(k)
         denom = jnp.where(jnp.abs(k) < 1, 1 - k**2, 1.0)
         poly = (poly[:m] - k * poly[m:0:-1]) / denom
-    return stable
+    return jnp.stack(ks[::-1]) if ks else jnp.zeros((0,), b.dtype)
+
+
+def is_stable(b: Float[Array, " p"]) -> Array:
+    """Whether `1 + b1 q^-1 + ... + bp q^-p` has all roots inside the unit circle."""
+    k = reflection_coefficients(b)
+    return jnp.all(jnp.abs(k) < 1) & jnp.all(jnp.isfinite(k))
 
 
 def is_admissible(params: CascadeParams, u_min, u_max) -> Array:

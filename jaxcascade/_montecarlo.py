@@ -49,6 +49,7 @@ import numpy as np
 import pandas as pd
 
 from ._estimators import estimator, takes
+from ._metrics import nrmse
 from ._model import CascadeParams, is_admissible
 from ._prior import random_system
 from ._simulate import add_noise, simulate, uniform_input
@@ -125,16 +126,15 @@ def _realisation(
     safe = CascadeParams.from_vector(
         jnp.where(admissible, estimate, truth_vector), orders, check=False
     )
-    residual = y_val - simulate(safe, u_val)
-    nrmse = jnp.sqrt(jnp.mean(residual**2)) / jnp.std(y_val)
-    nrmse = jnp.where(admissible & jnp.isfinite(nrmse), nrmse, jnp.inf)
+    error = nrmse(y_val, simulate(safe, u_val))
+    error = jnp.where(admissible & jnp.isfinite(error), error, jnp.inf)
     return {
         "key": jax.random.key_data(key) if _is_typed(key) else key,
         "estimate": estimate,
         "status": solution.status.astype(jnp.int32),
         "iterations": solution.iterations.astype(jnp.int32),
         "cost": jnp.asarray(solution.cost, dtype),
-        "nrmse": nrmse,
+        "nrmse": error,
         "admissible": admissible,
         "truth": truth_vector,
     }

@@ -16,7 +16,7 @@ import jax.numpy as jnp
 import optimistix as optx
 from jaxtyping import Array, Float
 
-from ._model import CascadeParams, Orders
+from ._model import CascadeParams, Orders, reflection_coefficients
 from ._simulate import signals
 from ._status import Status
 
@@ -47,17 +47,6 @@ def _step_up(k):
         padded = jnp.concatenate([poly, jnp.zeros((1,), k.dtype)])
         poly = padded + k[m] * padded[::-1]
     return poly[1:]
-
-
-def _step_down(b):
-    p = b.shape[0]
-    poly = jnp.concatenate([jnp.ones((1,), b.dtype), b])
-    ks = []
-    for m in range(p, 0, -1):
-        k = poly[m]
-        ks.append(k)
-        poly = (poly[:m] - k * poly[m:0:-1]) / (1 - k**2)
-    return jnp.stack(ks[::-1]) if ks else jnp.zeros((0,), b.dtype)
 
 
 def _breakpoints(z, bound):
@@ -100,7 +89,7 @@ def to_unconstrained(params: CascadeParams, u_min, u_max) -> Float[Array, " P"]:
     """Inverse of `from_unconstrained`; values on or past a bound are pulled just inside."""
     o = params.orders
     dtype = params.mR.dtype
-    k = _step_down(params.b) if o.p else params.b
+    k = reflection_coefficients(params.b) if o.p else params.b
     k = jnp.clip(k / _REFLECTION_LIMIT, -1 + 1e-6, 1 - 1e-6)
     z = jnp.concatenate(
         [

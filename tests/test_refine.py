@@ -1,0 +1,27 @@
+"""The admissible parameterisation used by output-error refinement and the robust fit."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxcascade as jc
+from jaxcascade._refine import from_unconstrained, to_unconstrained
+
+
+@pytest.mark.parametrize("orders", [jc.Orders(), jc.Orders(3, 2, 3, 3), jc.Orders(1, 1, 1, 0)])
+def test_round_trip(orders):
+    for seed in range(10):
+        p = jc.random_system(jax.random.PRNGKey(seed), orders)
+        q = from_unconstrained(to_unconstrained(p, -2.0, 2.0), orders, -2.0, 2.0)
+        # Exact up to rounding in the softmax / tanh maps.
+        np.testing.assert_allclose(q.to_vector(), p.to_vector(), atol=1e-12)
+
+
+@pytest.mark.parametrize("orders", [jc.Orders(), jc.Orders(3, 3, 2, 4)])
+def test_every_unconstrained_vector_is_admissible(orders):
+    z = 3.0 * jax.random.normal(jax.random.PRNGKey(0), (500, orders.size))
+    params = jax.vmap(lambda v: from_unconstrained(v, orders, -2.0, 2.0))(z)
+    ok = jax.vmap(lambda p: jc.is_admissible(p, -2.0, 2.0))(params)
+    assert bool(jnp.all(ok))
+    assert bool(jnp.all(params.cL >= 0)) and bool(jnp.all(params.cR >= 0))
