@@ -130,18 +130,24 @@ def least_squares(residual, z0, args, *, max_steps: int = 100, rtol=1e-8, atol=1
     solution = optx.least_squares(residual, solver, z0, args=args, max_steps=max_steps, throw=False)
     cost = jnp.mean(residual(solution.value, args) ** 2)
     finite = jnp.isfinite(cost) & jnp.all(jnp.isfinite(solution.value))
-    status = jnp.where(
-        ~finite,
-        Status.diverged,
-        jnp.where(
-            solution.result == optx.RESULTS.successful,
-            Status.converged,
-            jnp.where(
-                solution.result == optx.RESULTS.max_steps_reached,
-                Status.max_iterations,
-                Status.failed,
-            ),
-        ),
+    result = solution.result
+    # Linear-solver outcomes inside a step mean the Jacobian is numerically rank
+    # deficient at the iterate (a parameter direction the record does not excite, or a
+    # kink of the backlash): report them as `singular`, not as a generic failure.
+    rank_deficient = (
+        (result == optx.RESULTS.singular)
+        | (result == optx.RESULTS.breakdown)
+        | (result == optx.RESULTS.stagnation)
+    )
+    status = jnp.select(
+        [
+            ~finite | (result == optx.RESULTS.nonlinear_divergence),
+            result == optx.RESULTS.successful,
+            result == optx.RESULTS.max_steps_reached,
+            rank_deficient,
+        ],
+        [Status.diverged, Status.converged, Status.max_iterations, Status.singular],
+        Status.failed,
     )
     z = jnp.where(finite, solution.value, z0)
     return (
