@@ -1,26 +1,46 @@
 #!/usr/bin/env bash
-# Regenerate everything in results/ with the committed commands, one after another
-# (never two benchmarks at once: timings would be wrong). Roughly 45 minutes on 2 cores.
+# Regenerate results/ with the committed commands, one after another (never two
+# benchmarks at once: timings would be wrong). About an hour on 2 cores.
+#   bash benchmarks/run_all.sh            # every step
+#   bash benchmarks/run_all.sh sweeps     # only the named steps
 set -euo pipefail
 cd "$(dirname "$0")/.."
 export JAXCASCADE_CACHE=${JAXCASCADE_CACHE:-off}   # compile times reported cold
-# Issue 6: throughput vs the NumPy/SciPy baseline and the FLOP floor; scaling.
-jaxcascade bench --out results/bench.csv --json > results/bench.json
-python benchmarks/scaling.py --out results/scaling.csv
-# Issue 7: sweep throughput in-process vs 1 and 2 local Dask workers.
-python benchmarks/distributed_throughput.py --realisations 2048 --n 2000 --workers 1,2 \
-    --out results/distributed_throughput.csv
-# Issue 4: literal vs robust (100 realisations per cell; robust is ~1 s per fit here).
-python benchmarks/robust_vs_literal.py --realisations 100 --chunk-size 8 --quiet \
-    --out results/robust_vs_literal
-# Issue 3: SNR x N sweeps of both paper examples, 500 realisations per cell.
-for ex in 1 2; do
-    jaxcascade sweep --example $ex --snr 10,25,50 --n 500,1000,4000 --realisations 500 \
-        --seed 0 --out results/sweep_example$ex.parquet --plots results/sweep_example$ex
+
+bench() {  # issue 6: throughput vs NumPy/SciPy and the FLOP floor; scaling
+    jaxcascade bench --out results/bench.csv --json > results/bench.json
+    python benchmarks/scaling.py --out results/scaling.csv
+}
+distributed() {  # issue 7: in-process vs 1 and 2 local Dask workers
+    python benchmarks/distributed_throughput.py --realisations 2048 --n 2000 --workers 1,2 \
+        --out results/distributed_throughput.csv
+}
+robust() {  # issue 4: literal vs robust, 100 realisations per cell (robust ~1 s per fit)
+    python benchmarks/robust_vs_literal.py --realisations 100 --chunk-size 8 --quiet \
+        --out results/robust_vs_literal
+}
+sweeps() {  # issue 3: SNR x N sweeps of both paper examples, 500 realisations per cell
+    for ex in 1 2; do
+        jaxcascade sweep --example $ex --snr 10,25,50 --n 500,1000,4000 --realisations 500 \
+            --seed 0 --out results/sweep_example$ex.parquet --plots results/sweep_example$ex
+    done
+    jaxcascade sweep --example 2 --snr 25 --n 2000 --realisations 500 --seed 0 \
+        --out results/sweep_example2_paper.parquet
+}
+loop() {  # issue 5: undeclared effects, and the measured friction-damper records
+    python benchmarks/effects_loop.py --out results/effects_loop
+    bash benchmarks/brfd_loop.sh
+}
+reproduce() {  # issue 2: the paper's examples
+    for ex in 1 2; do for snr in 25 inf; do for est in literal robust; do
+        jaxcascade reproduce --example $ex --snr $snr --estimator $est --out results/reproduce \
+            > /dev/null
+    done; done; done
+}
+
+steps=("$@")
+[ ${#steps[@]} -gt 0 ] || steps=(bench distributed robust sweeps loop reproduce)
+for step in "${steps[@]}"; do
+    echo "== $step"
+    "$step"
 done
-# Issue 5: the model-error loop on the measured friction-damper records.
-bash benchmarks/brfd_loop.sh
-# Issue 2: the paper's examples.
-for ex in 1 2; do for snr in 25 inf; do for est in literal robust; do
-    jaxcascade reproduce --example $ex --snr $snr --estimator $est --out results/reproduce > /dev/null
-done; done; done
