@@ -34,7 +34,7 @@ def main(argv=None) -> int:
     from jaxcascade._effects import UNDECLARED, undeclared_record
 
     rows = []
-    for name in [*UNDECLARED, None]:
+    for name in UNDECLARED:
         model, ar = UNDECLARED[name]()
         key = jax.random.PRNGKey(args.seed)
         k_est, k_val = jax.random.split(key)
