@@ -114,6 +114,11 @@ class Effect:
 
 
 class OutputOffset(Effect):
+    """A constant added to the output. An offset `d` with `cL + d >= 0` and
+    `cR - d / mR >= 0` is exactly a change of the backlash gaps (the output of a backlash
+    plus `d` is the backlash with gaps `cL + d`, `cR - d / mR`), so only a larger offset
+    is an effect the declared model cannot already represent."""
+
     name = "output_offset"
     signature = ("mean",)
     description = "constant offset added to the output: y + d"
