@@ -86,6 +86,31 @@ def check_positive(value: float, name: str) -> float:
     return value
 
 
+def add_record_arguments(parser, *, scaling: str) -> None:
+    """Options shared by the commands that read a measured record (`fit`, `loop`)."""
+    parser.add_argument("--input", required=True, help="input column")
+    parser.add_argument("--output", required=True, help="output column")
+    parser.add_argument("--time", default=None, help="optional time column")
+    parser.add_argument("--orders", default="2,2,2,2", help="declared nR,nL,r,p (default 2,2,2,2)")
+    parser.add_argument("--decimate", type=int, default=1, help="anti-aliased decimation factor")
+    parser.add_argument(
+        "--scaling",
+        default=scaling,
+        choices=("none", "scale", "standard"),
+        help=f"units the model is fitted in; estimates are also mapped back (default {scaling})",
+    )
+
+
+def parse_orders(text: str):
+    """`--orders nR,nL,r,p` as `Orders`, or a CLIError naming the option."""
+    from ._model import Orders
+
+    try:
+        return Orders.parse(text)
+    except ValueError as error:
+        raise CLIError(f"--orders: {error}") from None
+
+
 def writable_folder(path) -> None:
     """Create `path` if needed and check it can be written, before any work starts."""
     import os

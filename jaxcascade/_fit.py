@@ -33,12 +33,9 @@ def fit_record(u, y, orders: Orders, name: str = "robust", **settings):
 
 
 def run_fit(args) -> int:
-    from ._cli import CLIError
+    from ._cli import parse_orders
 
-    try:
-        orders = Orders.parse(args.orders)
-    except ValueError as error:
-        raise CLIError(f"--orders: {error}") from None
+    orders = parse_orders(args.orders)
     estimator(args.estimator)  # unknown names fail here, before reading data
     record = read_record(
         args.data,
@@ -73,19 +70,11 @@ def run_fit(args) -> int:
 
 
 def add_parser(subparsers) -> None:
+    from ._cli import add_record_arguments
+
     parser = subparsers.add_parser("fit", help="fit the cascade to a CSV or Parquet record")
     parser.add_argument("data", help="CSV or Parquet file")
-    parser.add_argument("--input", required=True, help="input column")
-    parser.add_argument("--output", required=True, help="output column")
-    parser.add_argument("--time", default=None, help="optional time column")
-    parser.add_argument("--orders", default="2,2,2,2", help="nR,nL,r,p (default 2,2,2,2)")
+    add_record_arguments(parser, scaling="none")
     parser.add_argument("--estimator", default="robust", help="literal or robust (default)")
-    parser.add_argument("--decimate", type=int, default=1, help="keep every K-th sample")
-    parser.add_argument(
-        "--scaling",
-        default="none",
-        choices=("none", "scale", "standard"),
-        help="fit in scaled units (estimates are also mapped back); default none",
-    )
     parser.add_argument("--json", action="store_true", help="print a JSON result")
     parser.set_defaults(func=run_fit)

@@ -17,7 +17,6 @@ import numpy as np
 from ._arx import best_arx
 from ._data import read_record
 from ._metrics import fit_percent, nrmse
-from ._model import Orders
 
 
 def plot_compare(time, y, before, after, path, *, arx=None, title="") -> None:
@@ -100,14 +99,11 @@ def _p(test) -> str:
 
 
 def run_loop(args) -> int:
-    from ._cli import CLIError, writable_folder
+    from ._cli import CLIError, parse_orders, writable_folder
     from ._diagnose_plot import save_residual_figures
     from ._loop import model_error_loop
 
-    try:
-        orders = Orders.parse(args.orders)
-    except ValueError as error:
-        raise CLIError(f"--orders: {error}") from None
+    orders = parse_orders(args.orders)
     if args.max_effects < 0:
         raise CLIError(f"--max-effects must be >= 0, got {args.max_effects}.")
     options = dict(time_column=args.time, decimate=args.decimate, orders=orders)
@@ -152,11 +148,7 @@ def run_loop(args) -> int:
         )
     if args.report:
         folder = pathlib.Path(args.report)
-        command = (
-            "jaxcascade loop " + " ".join(sys.argv[2:])
-            if args.command_line is None
-            else (args.command_line)
-        )
+        command = "jaxcascade loop " + " ".join(sys.argv[2:])
         (folder / "report.json").write_text(json.dumps(full, indent=1))
         (folder / "report.md").write_text(_markdown(full, command))
         import pandas as pd
@@ -179,24 +171,16 @@ def run_loop(args) -> int:
 
 
 def add_parser(subparsers) -> None:
+    from ._cli import add_record_arguments
+
     parser = subparsers.add_parser(
         "loop", help="fit, test the residual, add the missing effect, report before/after"
     )
     parser.add_argument("train", help="estimation record (CSV or Parquet)")
     parser.add_argument("--validate", required=True, help="validation record")
-    parser.add_argument("--input", required=True, help="input column")
-    parser.add_argument("--output", required=True, help="output column")
-    parser.add_argument("--time", default=None, help="optional time column")
-    parser.add_argument("--orders", default="2,2,2,2", help="declared nR,nL,r,p")
-    parser.add_argument("--decimate", type=int, default=1, help="anti-aliased decimation factor")
-    parser.add_argument(
-        "--scaling",
-        default="scale",
-        choices=("none", "scale", "standard"),
-        help="units the model is fitted in (default: divide by the estimation std)",
-    )
+    add_record_arguments(parser, scaling="scale")
     parser.add_argument("--max-effects", type=int, default=3)
     parser.add_argument("--report", default=None, help="folder for the report and figures")
     parser.add_argument("--json", action="store_true", help="print the JSON summary")
     parser.add_argument("--quiet", action="store_true", help="no progress on stderr")
-    parser.set_defaults(func=run_loop, command_line=None)
+    parser.set_defaults(func=run_loop)
