@@ -123,6 +123,10 @@ class Refined(eqx.Module):
 def least_squares(residual, z0, args, *, max_steps: int = 100, rtol=1e-8, atol=1e-10):
     """Levenberg-Marquardt on `residual(z, args)` from `z0`, never raising.
 
+    Terminates (optimistix's Cauchy test) after an accepted step that moves every
+    element of `z` by less than `atol + rtol |z|` and every residual by less than
+    `atol + rtol |residual|`.
+
     **Returns:** `(z, cost, status, steps)` with `cost` the mean squared residual
     (inf if non-finite) and `status` a `Status` code.
     """
@@ -139,11 +143,16 @@ def least_squares(residual, z0, args, *, max_steps: int = 100, rtol=1e-8, atol=1
         | (result == optx.RESULTS.breakdown)
         | (result == optx.RESULTS.stagnation)
     )
+    # `nonlinear_max_steps_reached` is the outer iteration running out of `max_steps`;
+    # `max_steps_reached` would be an iterative linear solver's (none is used here).
     status = jnp.select(
         [
-            ~finite | (result == optx.RESULTS.nonlinear_divergence),
+            ~finite
+            | (result == optx.RESULTS.nonlinear_divergence)
+            | (result == optx.RESULTS.nonfinite),
             result == optx.RESULTS.successful,
-            result == optx.RESULTS.max_steps_reached,
+            (result == optx.RESULTS.nonlinear_max_steps_reached)
+            | (result == optx.RESULTS.max_steps_reached),
             rank_deficient,
         ],
         [Status.diverged, Status.converged, Status.max_iterations, Status.singular],

@@ -25,3 +25,19 @@ def test_every_unconstrained_vector_is_admissible(orders):
     ok = jax.vmap(lambda p: jc.is_admissible(p, -2.0, 2.0))(params)
     assert bool(jnp.all(ok))
     assert bool(jnp.all(params.cL >= 0)) and bool(jnp.all(params.cR >= 0))
+
+
+def test_running_out_of_steps_is_max_iterations():
+    # optimistix reports the outer loop's limit as `nonlinear_max_steps_reached`; it is
+    # a budget, not a failure of the method, and must say so in the results table.
+    from jaxcascade._refine import refine
+
+    truth = jc.example(1).params()
+    u = jax.random.uniform(jax.random.PRNGKey(0), (400,), minval=-2.0, maxval=2.0)
+    y = jc.simulate(truth, u)
+    start = jc.random_system(jax.random.PRNGKey(3), truth.orders)
+    stopped = refine(start, u, y, max_steps=2)
+    assert int(stopped.status) == int(jc.Status.max_iterations)
+    done = refine(truth, u, y, max_steps=50)
+    assert int(done.status) == int(jc.Status.converged)
+    assert float(done.cost) < 1e-20

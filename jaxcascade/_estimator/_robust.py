@@ -14,6 +14,19 @@ simulation-error landscape is friendlier (METHOD.md). This estimator
    the piecewise-smooth error looks like a failure; at a true minimum the restart
    terminates successfully) and returns it with that status.
 
+Tolerances. Levenberg-Marquardt stops after an accepted step that moves every
+(unconstrained) parameter by less than `atol + rtol |z|` and every residual sample by
+less than `atol + rtol |residual|`. The defaults, `rtol = 1e-6` and `atol = 1e-9`, are
+those of MATLAB's `lsqnonlin` (StepTolerance and FunctionTolerance 1e-6) and lie three
+orders of magnitude below the statistical precision of the estimates (standard
+deviations >= 1e-3 at SNR 50). The tighter `refine` defaults (1e-8, 1e-10) ask for more
+than a piecewise-smooth cost can give: with the backlash's switching instants moving
+under every step, the trust region crept on at an estimate already at the noise floor
+until `max_steps` (optimistix's `nonlinear_max_steps_reached`; every robust "failure"
+of the first issue-4 comparison, at NRMSE on the noise floor). Refitted with these
+tolerances, such a record converged and the other estimates of its batch moved by
+less than 1e-8.
+
 Every iterate is admissible by construction (`_refine.from_unconstrained`), so the
 result is never NaN; a start that fails is simply outranked.
 """
@@ -44,7 +57,16 @@ def _take(tree, index):
 
 @functools.partial(
     jax.jit,
-    static_argnames=("orders", "n_starts", "n_refine", "subset", "max_steps", "literal_start"),
+    static_argnames=(
+        "orders",
+        "n_starts",
+        "n_refine",
+        "subset",
+        "max_steps",
+        "literal_start",
+        "rtol",
+        "atol",
+    ),
 )
 def robust(
     u: Float[Array, " T"],
@@ -57,6 +79,8 @@ def robust(
     subset: int = 1000,
     max_steps: tuple[int, int] = (60, 150),
     literal_start: bool = True,
+    rtol: float = 1e-6,
+    atol: float = 1e-9,
 ) -> Solution:
     """Multi-start output-error estimate of one record (see module docstring).
 
@@ -65,6 +89,7 @@ def robust(
     - `u`, `y`: `Float[Array, " T"]` input and measured output.
     - `orders`: static model orders.
     - `key`: PRNG key for the starts; a fixed default keeps the estimator deterministic.
+    - `rtol`, `atol`: Levenberg-Marquardt's termination tolerances (module docstring).
 
     **Returns:** a `Solution` whose `history` has three rows (chosen start, after the
     subset stage, final), `iterations` the Levenberg-Marquardt steps of the chosen
@@ -72,6 +97,7 @@ def robust(
     """
     dtype = u.dtype
     y = y.astype(dtype)
+    tolerances = {"rtol": rtol, "atol": atol}
     key = jax.random.PRNGKey(0) if key is None else key
     u_max = 0.5 * (jnp.max(u) - jnp.min(u))
     starts = jax.vmap(lambda k: random_system(k, orders, 1.0, dtype))(
@@ -88,10 +114,12 @@ def robust(
         )
 
     n = min(subset, u.shape[0])
-    first = jax.vmap(lambda p: refine(p, u[:n], y[:n], max_steps=max_steps[0]))(starts)
+    first = jax.vmap(lambda p: refine(p, u[:n], y[:n], max_steps=max_steps[0], **tolerances))(
+        starts
+    )
     full_cost = jax.vmap(lambda p: jnp.mean(simulation_error(p, u, y) ** 2))(first.params)
     chosen = _best(full_cost, n_refine)
-    second = jax.vmap(lambda p: refine(p, u, y, max_steps=max_steps[1]))(
+    second = jax.vmap(lambda p: refine(p, u, y, max_steps=max_steps[1], **tolerances))(
         _take(first.params, chosen)
     )
     best = _best(second.cost, 1)[0]
@@ -100,7 +128,7 @@ def robust(
     # stall on a kink with its trust region collapsed (optimistix then reports failure)
     # at a point that is in fact the minimum. One restart from the chosen estimate tells
     # the two apart: at a minimum it terminates successfully within a few steps.
-    restart = refine(final.params, u, y, max_steps=max_steps[1])
+    restart = refine(final.params, u, y, max_steps=max_steps[1], **tolerances)
     final = jax.tree_util.tree_map(
         lambda again, first: jnp.where(restart.cost <= final.cost, again, first), restart, final
     )
