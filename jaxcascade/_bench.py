@@ -71,30 +71,57 @@ def device_description() -> str:
     return f"cpu: {model} ({cores} cores)"
 
 
-def batched_fit(example_number: int, n: int, iterations: int, dtype=None, micro_batch: int = 16):
-    """The jitted batched workload `(keys, params) -> (estimates, statuses)`, as `vmap`
-    over micro-batches of `micro_batch` realisations (`_batching.chunked_vmap`)."""
+def batched_fit(
+    example_number: int,
+    n: int,
+    iterations: int,
+    dtype=None,
+    *,
+    backend: str = "auto",
+    batch: int | None = None,
+):
+    """The jitted batched workload `(keys, params) -> (estimates, statuses)`.
+
+    `vmap` of simulation, noise and `voros` over batches of `batch` realisations, the
+    batches one after another (`_batching.chunked_vmap`). With the fused backend one
+    kernel call per iteration forms the normal equations of a whole batch (threads over
+    records inside the call), so batches are large (default 500); the XLA backend
+    materialises an N x P regressor matrix per realisation, so its batches are kept
+    cache-sized (default 16).
+    """
     import jax
     import jax.numpy as jnp
 
     from ._batching import chunked_vmap
     from ._estimate import voros
+    from ._normal_equations import resolve
     from ._simulate import measure, uniform_input
 
     ex = get_example(example_number)
     dtype = dtype or jnp.result_type(float)
+    backend = resolve(backend, ex.orders, dtype)
+    batch = batch or (500 if backend == "fused" else 16)
 
     def one(key, params):
         key_u, key_e = jax.random.split(key)
         u = uniform_input(key_u, n, ex.amplitude, dtype)
         y, _ = measure(key_e, params, u, ex.snr)
-        solution = voros(u, y, ex.orders, max_iterations=iterations, tol=-1.0)
+        solution = voros(u, y, ex.orders, max_iterations=iterations, tol=-1.0, backend=backend)
         return solution.params.to_vector(), solution.status
 
-    return jax.jit(chunked_vmap(one, micro_batch, in_axes=(0, None)))
+    return jax.jit(chunked_vmap(one, batch, in_axes=(0, None))), backend
 
 
-def run_jax(realisations: int, n: int, iterations: int, example_number=1, repeats=3, seed=0):
+def run_jax(
+    realisations: int,
+    n: int,
+    iterations: int,
+    example_number=1,
+    repeats=3,
+    seed=0,
+    backend="auto",
+    batch=None,
+):
     """Compile and time the batched path; returns a dict of figures."""
     import jax
     import jax.numpy as jnp
@@ -103,7 +130,8 @@ def run_jax(realisations: int, n: int, iterations: int, example_number=1, repeat
     params = get_example(example_number).params(dtype)
     keys = jax.random.split(jax.random.PRNGKey(seed), realisations)
     start = time.perf_counter()
-    compiled = batched_fit(example_number, n, iterations, dtype).lower(keys, params).compile()
+    fit, backend = batched_fit(example_number, n, iterations, dtype, backend=backend, batch=batch)
+    compiled = fit.lower(keys, params).compile()
     compile_s = time.perf_counter() - start
     best = math.inf
     for _ in range(max(repeats, 1)):
@@ -119,6 +147,7 @@ def run_jax(realisations: int, n: int, iterations: int, example_number=1, repeat
         "finite_fraction": float(np.mean(np.all(np.isfinite(np.asarray(estimates)), axis=1))),
         "status_counts": dict(zip(*(a.tolist() for a in codes_counts), strict=True)),
         "dtype": str(np.dtype(dtype)),
+        "backend": backend,
     }
 
 

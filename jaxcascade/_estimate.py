@@ -10,6 +10,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
 from ._model import CascadeParams, Orders, is_admissible
+from ._normal_equations import normal_equations, resolve, solve_first, solve_step
 from ._regression import block_columns, regression, solve_normal_equations
 from ._simulate import linear_block, pwl
 from ._status import Status
@@ -59,18 +60,23 @@ def initial_guess(orders: Orders, u_min, u_max, dtype=None) -> CascadeParams:
     )
 
 
-def first_step(init: CascadeParams, u, y):
+def first_step(init: CascadeParams, u, y, backend: str = "xla"):
     """The paper's first iteration: v ~ u, x ~ y, backlash held at its initial values.
 
     Only the NS and LD parameters are estimated. The switching functions use unit
     slopes (the all-zero initial slopes would zero the breakpoint regressors), so the
     breakpoint coefficients estimate `D * M`; they are divided by the new slopes here.
+    `backend` chooses how the normal equations are formed (`_normal_equations`).
     """
     o = init.orders
     ns_ld, bl = block_columns(o)
-    reg = regression(init, u, y, u, y, unit_slopes=True)
-    target = reg.yc - reg.phi[:, bl] @ init.to_theta()[bl]
-    coef, singular, cost = solve_normal_equations(reg.phi[:, ns_ld], target)
+    if resolve(backend, o, u.dtype) == "fused":
+        ne = normal_equations(init, u, y, first=True, backend="fused")
+        coef, singular, cost = solve_first(ne, init, u.shape[0])
+    else:
+        reg = regression(init, u, y, u, y, unit_slopes=True)
+        target = reg.yc - reg.phi[:, bl] @ init.to_theta()[bl]
+        coef, singular, cost = solve_normal_equations(reg.phi[:, ns_ld], target)
     vector = jnp.concatenate([coef, init.to_vector()[bl]])
     params = CascadeParams.from_vector(vector, o, check=False)
     params = eqx.tree_at(
@@ -87,12 +93,23 @@ def _safe_divide(num, den):
     return jnp.where(den != 0, num / jnp.where(den != 0, den, 1.0), jnp.inf)
 
 
-def voros_step(params: CascadeParams, u, y):
-    """One iteration s -> s+1 (steps a and b of the paper): returns the new vector."""
-    v = pwl(params, u)
-    x = linear_block(params, v)
-    reg = regression(params, u, y, v, x)
-    theta, singular, cost = solve_normal_equations(reg.phi, reg.yc, blocks=params.orders.size - 2)
+def voros_step(params: CascadeParams, u, y, backend: str = "xla"):
+    """One iteration s -> s+1 (steps a and b of the paper): returns the new vector.
+
+    `backend`: `"xla"` solves the regression from its materialised regressors (cost J
+    from the residual); `"fused"` from the native kernel's normal equations (cost J
+    from them, accurate to about `eps |yc|^2 / N`); `"auto"` picks (`_normal_equations`).
+    """
+    if resolve(backend, params.orders, u.dtype) == "fused":
+        ne = normal_equations(params, u, y, backend="fused")
+        theta, singular, cost = solve_step(ne, u.shape[0])
+    else:
+        v = pwl(params, u)
+        x = linear_block(params, v)
+        reg = regression(params, u, y, v, x)
+        theta, singular, cost = solve_normal_equations(
+            reg.phi, reg.yc, blocks=params.orders.size - 2
+        )
     new = CascadeParams.from_theta(theta, params.orders, check=False)
     return new.to_vector(), singular, cost
 
@@ -108,7 +125,7 @@ def _classify(new, singular, u_min, u_max, orders, bound):
     )
 
 
-@functools.partial(jax.jit, static_argnames=("orders", "max_iterations"))
+@functools.partial(jax.jit, static_argnames=("orders", "max_iterations", "backend"))
 def voros(
     u: Float[Array, " T"],
     y: Float[Array, " T"],
@@ -118,6 +135,7 @@ def voros(
     max_iterations: int = 50,
     tol: float = 1e-10,
     divergence_bound: float = 1e6,
+    backend: str = "auto",
 ) -> Solution:
     """The paper's iterative least-squares estimator, literally (eqs. 19-28).
 
@@ -133,6 +151,9 @@ def voros(
     - `u`, `y`: `Float[Array, " T"]` input and measured output of one record.
     - `orders`: static model orders.
     - `init`: initial values; default `initial_guess(orders, min(u), max(u))`.
+    - `backend`: how each step's normal equations are formed: `"xla"` (materialised
+      regressors), `"fused"` (the native CPU kernel, float64) or `"auto"` (fused where
+      it applies); the same estimates up to rounding (`_normal_equations`).
     """
     dtype = u.dtype
     y = y.astype(dtype)
@@ -145,7 +166,7 @@ def voros(
         _classify, u_min=u_min, u_max=u_max, orders=orders, bound=divergence_bound
     )
 
-    first, singular, cost = first_step(init, u, y)
+    first, singular, cost = first_step(init, u, y, backend)
     status = classify(first, singular)
     accepted = status == _RUNNING
     vector = jnp.where(accepted, first, start)
@@ -160,7 +181,7 @@ def voros(
     def body(carry):
         k, vector, history, status, cost = carry
         new, singular, new_cost = voros_step(
-            CascadeParams.from_vector(vector, orders, check=False), u, y
+            CascadeParams.from_vector(vector, orders, check=False), u, y, backend
         )
         new_status = classify(new, singular)
         accepted = new_status == _RUNNING

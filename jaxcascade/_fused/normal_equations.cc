@@ -1,0 +1,220 @@
+// Fused normal equations of the key-term separated regression (Vörös 2016, eqs. 15-28).
+//
+// For each record of a batch and the current estimates, one pass over time computes the
+// internal signals v (eq. 1) and x (eq. 6), the switching variables g1, g2 (eqs. 10-11),
+// the corrected output yc (eq. 25) and the regressors phi (eq. 17), and accumulates the
+// two diagonal blocks of the Gram matrix phi^T phi, the right-hand sides phi^T yc and
+// yc^T yc, without ever storing phi. Four records share one pass, one per SIMD lane,
+// and the batch is split over threads.
+//
+// Block 1 holds the NS and LD columns and the cL column (all carry g1); block 2 the mR
+// and C columns (they carry g2); g1 g2 = 0, so the blocks are all of phi^T phi.
+// With `first` set, the pass is the paper's first iteration: v = u, x = y (measured),
+// unit slopes in the breakpoint columns. The Python side (jaxcascade/_fused) is the
+// reference for every formula here: jaxcascade/_regression.py.
+#include <algorithm>
+#include <cstdint>
+#include <cstdlib>
+#include <thread>
+#include <vector>
+
+#include "xla/ffi/api/ffi.h"
+
+namespace ffi = xla::ffi;
+
+namespace {
+
+typedef double v4 __attribute__((vector_size(32)));
+constexpr int kLanes = 4;
+constexpr int kMaxColumns = 64;  // block-1 columns; the Python side checks the orders
+constexpr int kMaxLag = 16;      // r and p
+
+inline v4 splat(double a) { return v4{a, a, a, a}; }
+// 1.0 where s < 0, else 0.0: the paper's h (eq. 4).
+inline v4 heaviside(v4 s) {
+  return (v4)((s < splat(0.0)) & (__attribute__((vector_size(32))) long long)splat(1.0));
+}
+
+struct Orders {
+  int64_t nR, nL, r, p;
+  int64_t size() const { return nR + nR - 1 + nL + nL - 1 + (r - 1) + p + 3; }
+  int64_t block1() const { return size() - 2; }
+};
+
+// Records [b0, b0 + 4) of the batch (indices past the end repeat the last record).
+void group(const double* u, const double* y, const double* params, int64_t batch, int64_t n,
+           const Orders& o, bool first, int64_t b0, double* gram1, double* rhs1,
+           double* gram2, double* rhs2, double* ycc) {
+  const int64_t P = o.size(), K = o.block1();
+  int64_t rows[kLanes];
+  for (int l = 0; l < kLanes; ++l) rows[l] = std::min(b0 + l, batch - 1);
+  auto lanes = [&](int64_t offset, const double* base, int64_t stride) {
+    v4 out;
+    for (int l = 0; l < kLanes; ++l) out[l] = base[rows[l] * stride + offset];
+    return out;
+  };
+  // Parameters, one vector per parameter (lane = record).
+  v4 theta[kMaxColumns + 3];
+  for (int64_t i = 0; i < P; ++i) theta[i] = lanes(i, params, P);
+  const v4* MR = theta;
+  const v4* DR = MR + o.nR;
+  const v4* ML = DR + (o.nR - 1);
+  const v4* DL = ML + o.nL;
+  const v4* a = DL + (o.nL - 1);
+  const v4* b = a + (o.r - 1);
+  const v4 cL = theta[P - 3], mR = theta[P - 2], cR = theta[P - 1];
+  const v4 one = splat(1.0), zero = splat(0.0);
+
+  v4 G1[kMaxColumns * (kMaxColumns + 1) / 2] = {};
+  v4 r1[kMaxColumns] = {};
+  v4 G2[3] = {}, r2[2] = {}, yy = zero;
+  v4 v_past[kMaxLag] = {}, x_past[kMaxLag] = {};  // v(t-1), v(t-2), ...; x(t-1), ...
+  v4 u_prev = zero, y_prev = zero;
+  v4 phi[kMaxColumns];
+
+  for (int64_t t = 0; t < n; ++t) {
+    const v4 u_t = lanes(t, u, n), y_t = lanes(t, y, n);
+    v4 x_t;
+    if (first) {
+      x_t = y_t;
+    } else {  // eq. 6 with a1 = 1
+      x_t = v_past[0];
+      for (int64_t i = 1; i < o.r; ++i) x_t += a[i - 1] * v_past[i];
+      for (int64_t j = 0; j < o.p; ++j) x_t -= b[j] * x_past[j];
+    }
+    // eqs. 10-11 with mL = 1; the left line wins where both hold.
+    const v4 g1 = heaviside(x_t + cL - y_prev);
+    const v4 g2 = heaviside((y_prev - mR * x_t + mR * cR) / mR) * (one - g1);
+    const v4 yc = y_t - y_prev * (one - g1) * (one - g2);
+    // eq. 17, NS and LD columns, with u1 = u(t-1).
+    const v4 u1 = u_prev;
+    int64_t k = 0;
+    for (int64_t i = 0; i < o.nR; ++i) {
+      const v4 d = i == 0 ? zero : DR[i - 1];
+      phi[k++] = heaviside(d - u1) * u1;
+    }
+    for (int64_t i = 1; i < o.nR; ++i)
+      phi[k++] = -(first ? one : MR[i]) * heaviside(DR[i - 1] - u1);
+    for (int64_t j = 0; j < o.nL; ++j) {
+      const v4 d = j == 0 ? zero : DL[j - 1];
+      phi[k++] = heaviside(u1 - d) * u1;
+    }
+    for (int64_t j = 1; j < o.nL; ++j)
+      phi[k++] = -(first ? one : ML[j]) * heaviside(u1 - DL[j - 1]);
+    for (int64_t i = 2; i <= o.r; ++i) phi[k++] = v_past[i - 1];
+    for (int64_t j = 1; j <= o.p; ++j) phi[k++] = -x_past[j - 1];
+    for (int64_t c = 0; c < k; ++c) phi[c] *= g1;
+    phi[k++] = g1;
+    // Block 1 (lower triangle, row-major) and its right-hand side.
+    int64_t e = 0;
+    for (int64_t c = 0; c < K; ++c) {
+      const v4 pc = phi[c];
+      for (int64_t d = 0; d <= c; ++d) G1[e++] += pc * phi[d];
+      r1[c] += pc * yc;
+    }
+    // Block 2: columns x g2 and -g2.
+    const v4 q0 = x_t * g2, q1 = -g2;
+    G2[0] += q0 * q0;
+    G2[1] += q1 * q0;
+    G2[2] += q1 * q1;
+    r2[0] += q0 * yc;
+    r2[1] += q1 * yc;
+    yy += yc * yc;
+    // Advance the signals: v(t) = NS(u(t)) (eq. 1), or u(t) in the first iteration.
+    v4 v_t;
+    if (first) {
+      v_t = u_t;
+    } else {
+      v_t = zero;
+      for (int64_t i = 0; i < o.nR; ++i) {
+        const v4 d = i == 0 ? zero : DR[i - 1];
+        v_t += MR[i] * heaviside(d - u_t) * (u_t - d);
+      }
+      for (int64_t j = 0; j < o.nL; ++j) {
+        const v4 d = j == 0 ? zero : DL[j - 1];
+        v_t += ML[j] * heaviside(u_t - d) * (u_t - d);
+      }
+    }
+    for (int64_t i = std::max<int64_t>(o.r, 1) - 1; i > 0; --i) v_past[i] = v_past[i - 1];
+    v_past[0] = v_t;
+    for (int64_t j = o.p - 1; j > 0; --j) x_past[j] = x_past[j - 1];
+    if (o.p > 0) x_past[0] = x_t;
+    u_prev = u_t;
+    y_prev = y_t;
+  }
+  for (int l = 0; l < kLanes && b0 + l < batch; ++l) {
+    const int64_t b = b0 + l;
+    int64_t e = 0;
+    for (int64_t c = 0; c < K; ++c) {
+      for (int64_t d = 0; d <= c; ++d, ++e) {
+        gram1[(b * K + c) * K + d] = G1[e][l];
+        gram1[(b * K + d) * K + c] = G1[e][l];
+      }
+      rhs1[b * K + c] = r1[c][l];
+    }
+    gram2[b * 4 + 0] = G2[0][l];
+    gram2[b * 4 + 1] = G2[1][l];
+    gram2[b * 4 + 2] = G2[1][l];
+    gram2[b * 4 + 3] = G2[2][l];
+    rhs2[b * 2 + 0] = r2[0][l];
+    rhs2[b * 2 + 1] = r2[1][l];
+    ycc[b] = yy[l];
+  }
+}
+
+int64_t thread_count(int64_t groups) {
+  int64_t threads = std::thread::hardware_concurrency();
+  if (const char* env = std::getenv("JAXCASCADE_THREADS")) threads = std::atoll(env);
+  return std::max<int64_t>(1, std::min(threads, groups));
+}
+
+ffi::Error NormalEquationsImpl(ffi::Buffer<ffi::F64> u, ffi::Buffer<ffi::F64> y,
+                               ffi::Buffer<ffi::F64> params, int64_t nR, int64_t nL,
+                               int64_t r, int64_t p, int64_t first,
+                               ffi::ResultBuffer<ffi::F64> gram1,
+                               ffi::ResultBuffer<ffi::F64> rhs1,
+                               ffi::ResultBuffer<ffi::F64> gram2,
+                               ffi::ResultBuffer<ffi::F64> rhs2,
+                               ffi::ResultBuffer<ffi::F64> ycc) {
+  const Orders o{nR, nL, r, p};
+  if (nR < 1 || nL < 1 || r < 1 || p < 0 || r > kMaxLag || p > kMaxLag ||
+      o.block1() > kMaxColumns)
+    return ffi::Error::InvalidArgument("normal_equations: unsupported orders");
+  const auto dims = u.dimensions();
+  if (dims.size() < 1) return ffi::Error::InvalidArgument("normal_equations: u needs an axis");
+  const int64_t n = dims.back();
+  const int64_t batch = n == 0 ? 0 : static_cast<int64_t>(u.element_count()) / n;
+  if (params.dimensions().back() != o.size())
+    return ffi::Error::InvalidArgument("normal_equations: parameter vector of the wrong size");
+  const int64_t groups = (batch + kLanes - 1) / kLanes;
+  const int64_t threads = thread_count(groups);
+  auto work = [&](int64_t worker) {
+    for (int64_t g = worker; g < groups; g += threads)
+      group(u.typed_data(), y.typed_data(), params.typed_data(), batch, n, o, first != 0,
+            g * kLanes, gram1->typed_data(), rhs1->typed_data(), gram2->typed_data(),
+            rhs2->typed_data(), ycc->typed_data());
+  };
+  std::vector<std::thread> pool;
+  for (int64_t w = 1; w < threads; ++w) pool.emplace_back(work, w);
+  work(0);
+  for (auto& thread : pool) thread.join();
+  return ffi::Error::Success();
+}
+
+}  // namespace
+
+XLA_FFI_DEFINE_HANDLER_SYMBOL(JaxcascadeNormalEquations, NormalEquationsImpl,
+                              ffi::Ffi::Bind()
+                                  .Arg<ffi::Buffer<ffi::F64>>()
+                                  .Arg<ffi::Buffer<ffi::F64>>()
+                                  .Arg<ffi::Buffer<ffi::F64>>()
+                                  .Attr<int64_t>("nR")
+                                  .Attr<int64_t>("nL")
+                                  .Attr<int64_t>("r")
+                                  .Attr<int64_t>("p")
+                                  .Attr<int64_t>("first")
+                                  .Ret<ffi::Buffer<ffi::F64>>()
+                                  .Ret<ffi::Buffer<ffi::F64>>()
+                                  .Ret<ffi::Buffer<ffi::F64>>()
+                                  .Ret<ffi::Buffer<ffi::F64>>()
+                                  .Ret<ffi::Buffer<ffi::F64>>());
