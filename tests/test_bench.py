@@ -12,7 +12,7 @@ import sys
 
 import pytest
 
-from jaxcascade import _flops
+from jaxcascade import _flops, _fused
 from jaxcascade._bench import SUMMARY_KEYS
 from jaxcascade._cli import main
 from jaxcascade._model import Orders
@@ -39,9 +39,20 @@ def test_bench_json_is_sane(capsys, tmp_path):
         (row,) = list(csv.DictReader(file))
     assert float(row["fits_per_s"]) == pytest.approx(figures["fits_per_s"])
     assert row["dtype"] == "float64"
+    assert row["backend"] == ("fused" if _fused.available() else "xla")
     assert (int(row["n"]), int(row["realisations"]), int(row["iterations"])) == (300, 8, 3)
     flops = _flops.flops_per_fit(Orders(), 300, 3)["total"]
     assert int(row["flops_per_fit"]) == flops
+
+
+def test_bench_xla_backend_runs(capsys, tmp_path):
+    # the reference path stays benchmarkable next to the fused kernel
+    out = tmp_path / "bench.csv"
+    assert main(["bench", *TINY, *FAST, "--backend", "xla", "--out", str(out)]) == 0
+    assert "xla normal equations" in capsys.readouterr().out
+    with open(out) as file:
+        (row,) = list(csv.DictReader(file))
+    assert row["backend"] == "xla" and float(row["fits_per_s"]) > 0
 
 
 def test_bench_rejects_bad_values(capsys):

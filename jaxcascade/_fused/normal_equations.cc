@@ -35,35 +35,51 @@ inline v4 heaviside(v4 s) {
   return (v4)((s < splat(0.0)) & (__attribute__((vector_size(32))) long long)splat(1.0));
 }
 
-struct Orders {
-  int64_t nR, nL, r, p;
-  int64_t size() const { return nR + nR - 1 + nL + nL - 1 + (r - 1) + p + 3; }
-  int64_t block1() const { return size() - 2; }
+// Model orders, known at compile time (`Fixed`, so that every loop over columns unrolls
+// and the regressors live in registers) or at run time (`Dynamic`).
+template <int NR, int NL, int R, int PP>
+struct Fixed {
+  static constexpr int64_t nR = NR, nL = NL, r = R, p = PP;
 };
+struct Dynamic {
+  int64_t nR, nL, r, p;
+};
+template <class O>
+int64_t size(const O& o) { return o.nR + o.nR - 1 + o.nL + o.nL - 1 + (o.r - 1) + o.p + 3; }
 
 // Records [b0, b0 + 4) of the batch (indices past the end repeat the last record).
+// `scratch` holds 2 n vectors: u and y of the four records, interleaved by lane.
+template <bool First, class O>
 void group(const double* u, const double* y, const double* params, int64_t batch, int64_t n,
-           const Orders& o, bool first, int64_t b0, double* gram1, double* rhs1,
-           double* gram2, double* rhs2, double* ycc) {
-  const int64_t P = o.size(), K = o.block1();
+           const O o, int64_t b0, v4* scratch, double* gram1, double* rhs1, double* gram2,
+           double* rhs2, double* ycc) {
+  const int64_t P = size(o), K = P - 2;
   int64_t rows[kLanes];
   for (int l = 0; l < kLanes; ++l) rows[l] = std::min(b0 + l, batch - 1);
-  auto lanes = [&](int64_t offset, const double* base, int64_t stride) {
-    v4 out;
-    for (int l = 0; l < kLanes; ++l) out[l] = base[rows[l] * stride + offset];
-    return out;
-  };
+  v4* us = scratch;
+  v4* ys = scratch + n;
+  for (int l = 0; l < kLanes; ++l) {
+    const double* ur = u + rows[l] * n;
+    const double* yr = y + rows[l] * n;
+    for (int64_t t = 0; t < n; ++t) {
+      us[t][l] = ur[t];
+      ys[t][l] = yr[t];
+    }
+  }
   // Parameters, one vector per parameter (lane = record).
   v4 theta[kMaxColumns + 3];
-  for (int64_t i = 0; i < P; ++i) theta[i] = lanes(i, params, P);
+  for (int64_t i = 0; i < P; ++i)
+    for (int l = 0; l < kLanes; ++l) theta[i][l] = params[rows[l] * P + i];
   const v4* MR = theta;
   const v4* DR = MR + o.nR;
   const v4* ML = DR + (o.nR - 1);
   const v4* DL = ML + o.nL;
   const v4* a = DL + (o.nL - 1);
   const v4* b = a + (o.r - 1);
-  const v4 cL = theta[P - 3], mR = theta[P - 2], cR = theta[P - 1];
   const v4 one = splat(1.0), zero = splat(0.0);
+  const v4 cL = theta[P - 3], mR = theta[P - 2], cR = theta[P - 1];
+  // h(n / mR) = h(n * (1 / mR)): same sign, without a division per sample.
+  const v4 mRcR = mR * cR, inv_mR = one / mR;
 
   v4 G1[kMaxColumns * (kMaxColumns + 1) / 2] = {};
   v4 r1[kMaxColumns] = {};
@@ -73,9 +89,9 @@ void group(const double* u, const double* y, const double* params, int64_t batch
   v4 phi[kMaxColumns];
 
   for (int64_t t = 0; t < n; ++t) {
-    const v4 u_t = lanes(t, u, n), y_t = lanes(t, y, n);
+    const v4 u_t = us[t], y_t = ys[t];
     v4 x_t;
-    if (first) {
+    if (First) {
       x_t = y_t;
     } else {  // eq. 6 with a1 = 1
       x_t = v_past[0];
@@ -84,7 +100,7 @@ void group(const double* u, const double* y, const double* params, int64_t batch
     }
     // eqs. 10-11 with mL = 1; the left line wins where both hold.
     const v4 g1 = heaviside(x_t + cL - y_prev);
-    const v4 g2 = heaviside((y_prev - mR * x_t + mR * cR) / mR) * (one - g1);
+    const v4 g2 = heaviside((y_prev - mR * x_t + mRcR) * inv_mR) * (one - g1);
     const v4 yc = y_t - y_prev * (one - g1) * (one - g2);
     // eq. 17, NS and LD columns, with u1 = u(t-1).
     const v4 u1 = u_prev;
@@ -94,17 +110,17 @@ void group(const double* u, const double* y, const double* params, int64_t batch
       phi[k++] = heaviside(d - u1) * u1;
     }
     for (int64_t i = 1; i < o.nR; ++i)
-      phi[k++] = -(first ? one : MR[i]) * heaviside(DR[i - 1] - u1);
+      phi[k++] = -(First ? one : MR[i]) * heaviside(DR[i - 1] - u1);
     for (int64_t j = 0; j < o.nL; ++j) {
       const v4 d = j == 0 ? zero : DL[j - 1];
       phi[k++] = heaviside(u1 - d) * u1;
     }
     for (int64_t j = 1; j < o.nL; ++j)
-      phi[k++] = -(first ? one : ML[j]) * heaviside(u1 - DL[j - 1]);
+      phi[k++] = -(First ? one : ML[j]) * heaviside(u1 - DL[j - 1]);
     for (int64_t i = 2; i <= o.r; ++i) phi[k++] = v_past[i - 1];
     for (int64_t j = 1; j <= o.p; ++j) phi[k++] = -x_past[j - 1];
-    for (int64_t c = 0; c < k; ++c) phi[c] *= g1;
-    phi[k++] = g1;
+    for (int64_t c = 0; c < K - 1; ++c) phi[c] *= g1;
+    phi[K - 1] = g1;
     // Block 1 (lower triangle, row-major) and its right-hand side.
     int64_t e = 0;
     for (int64_t c = 0; c < K; ++c) {
@@ -122,7 +138,7 @@ void group(const double* u, const double* y, const double* params, int64_t batch
     yy += yc * yc;
     // Advance the signals: v(t) = NS(u(t)) (eq. 1), or u(t) in the first iteration.
     v4 v_t;
-    if (first) {
+    if (First) {
       v_t = u_t;
     } else {
       v_t = zero;
@@ -135,7 +151,7 @@ void group(const double* u, const double* y, const double* params, int64_t batch
         v_t += ML[j] * heaviside(u_t - d) * (u_t - d);
       }
     }
-    for (int64_t i = std::max<int64_t>(o.r, 1) - 1; i > 0; --i) v_past[i] = v_past[i - 1];
+    for (int64_t i = (o.r > 1 ? o.r : 1) - 1; i > 0; --i) v_past[i] = v_past[i - 1];
     v_past[0] = v_t;
     for (int64_t j = o.p - 1; j > 0; --j) x_past[j] = x_past[j - 1];
     if (o.p > 0) x_past[0] = x_t;
@@ -162,6 +178,19 @@ void group(const double* u, const double* y, const double* params, int64_t batch
   }
 }
 
+// One group with the orders' fastest instantiation: the paper's orders compile to
+// straight-line code; any other orders run the same code with run-time loop bounds.
+template <bool First>
+void dispatch(const double* u, const double* y, const double* params, int64_t batch,
+              int64_t n, const Dynamic& o, int64_t b0, v4* scratch, double* gram1,
+              double* rhs1, double* gram2, double* rhs2, double* ycc) {
+  if (o.nR == 2 && o.nL == 2 && o.r == 2 && o.p == 2)
+    group<First>(u, y, params, batch, n, Fixed<2, 2, 2, 2>{}, b0, scratch, gram1, rhs1, gram2,
+                 rhs2, ycc);
+  else
+    group<First>(u, y, params, batch, n, o, b0, scratch, gram1, rhs1, gram2, rhs2, ycc);
+}
+
 int64_t thread_count(int64_t groups) {
   int64_t threads = std::thread::hardware_concurrency();
   if (const char* env = std::getenv("JAXCASCADE_THREADS")) threads = std::atoll(env);
@@ -176,23 +205,26 @@ ffi::Error NormalEquationsImpl(ffi::Buffer<ffi::F64> u, ffi::Buffer<ffi::F64> y,
                                ffi::ResultBuffer<ffi::F64> gram2,
                                ffi::ResultBuffer<ffi::F64> rhs2,
                                ffi::ResultBuffer<ffi::F64> ycc) {
-  const Orders o{nR, nL, r, p};
+  const Dynamic o{nR, nL, r, p};
   if (nR < 1 || nL < 1 || r < 1 || p < 0 || r > kMaxLag || p > kMaxLag ||
-      o.block1() > kMaxColumns)
+      size(o) - 2 > kMaxColumns)
     return ffi::Error::InvalidArgument("normal_equations: unsupported orders");
   const auto dims = u.dimensions();
   if (dims.size() < 1) return ffi::Error::InvalidArgument("normal_equations: u needs an axis");
   const int64_t n = dims.back();
   const int64_t batch = n == 0 ? 0 : static_cast<int64_t>(u.element_count()) / n;
-  if (params.dimensions().back() != o.size())
+  if (params.dimensions().back() != size(o))
     return ffi::Error::InvalidArgument("normal_equations: parameter vector of the wrong size");
   const int64_t groups = (batch + kLanes - 1) / kLanes;
   const int64_t threads = thread_count(groups);
   auto work = [&](int64_t worker) {
-    for (int64_t g = worker; g < groups; g += threads)
-      group(u.typed_data(), y.typed_data(), params.typed_data(), batch, n, o, first != 0,
-            g * kLanes, gram1->typed_data(), rhs1->typed_data(), gram2->typed_data(),
-            rhs2->typed_data(), ycc->typed_data());
+    std::vector<v4> scratch(2 * n);
+    for (int64_t g = worker; g < groups; g += threads) {
+      auto run = first ? dispatch<true> : dispatch<false>;
+      run(u.typed_data(), y.typed_data(), params.typed_data(), batch, n, o, g * kLanes,
+          scratch.data(), gram1->typed_data(), rhs1->typed_data(), gram2->typed_data(),
+          rhs2->typed_data(), ycc->typed_data());
+    }
   };
   std::vector<std::thread> pool;
   for (int64_t w = 1; w < threads; ++w) pool.emplace_back(work, w);
