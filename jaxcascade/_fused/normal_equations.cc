@@ -28,12 +28,16 @@ typedef double v4 __attribute__((vector_size(32)));
 constexpr int kLanes = 4;
 constexpr int kMaxColumns = 64;  // block-1 columns; the Python side checks the orders
 constexpr int kMaxLag = 16;      // r and p
+constexpr int64_t kBlock = 32;   // samples buffered per register-tiled Gram update
+constexpr int64_t kMaxWidth = (kMaxColumns + 1 + 3) / 4 * 4;
+
+typedef long long m4 __attribute__((vector_size(32)));  // lane masks: all ones or zero
 
 inline v4 splat(double a) { return v4{a, a, a, a}; }
-// 1.0 where s < 0, else 0.0: the paper's h (eq. 4).
-inline v4 heaviside(v4 s) {
-  return (v4)((s < splat(0.0)) & (__attribute__((vector_size(32))) long long)splat(1.0));
-}
+// Where s < 0: the paper's h (eq. 4) as a lane mask.
+inline m4 negative(v4 s) { return s < splat(0.0); }
+// x where the mask is set, else 0 (the product of x with h, exactly, up to the sign of 0).
+inline v4 keep(m4 mask, v4 x) { return (v4)(mask & (m4)x); }
 
 // Model orders, known at compile time (`Fixed`, so that every loop over columns unrolls
 // and the regressors live in registers) or at run time (`Dynamic`).
@@ -48,7 +52,8 @@ template <class O>
 int64_t size(const O& o) { return o.nR + o.nR - 1 + o.nL + o.nL - 1 + (o.r - 1) + o.p + 3; }
 
 // Records [b0, b0 + 4) of the batch (indices past the end repeat the last record).
-// `scratch` holds 2 n vectors: u and y of the four records, interleaved by lane.
+// `scratch` holds u and y of the four records, interleaved by lane (2 n vectors), then
+// the Gram matrix and the row buffer of block 1 (`scratch_size`).
 template <bool First, class O>
 void group(const double* u, const double* y, const double* params, int64_t batch, int64_t n,
            const O o, int64_t b0, v4* scratch, double* gram1, double* rhs1, double* gram2,
@@ -80,15 +85,28 @@ void group(const double* u, const double* y, const double* params, int64_t batch
   const v4 cL = theta[P - 3], mR = theta[P - 2], cR = theta[P - 1];
   // h(n / mR) = h(n * (1 / mR)): same sign, without a division per sample.
   const v4 mRcR = mR * cR, inv_mR = one / mR;
+  // Breakpoint-column values -M (eq. 17), unit slopes in the first iteration.
+  v4 minus_MR[kMaxColumns], minus_ML[kMaxColumns];
+  for (int64_t i = 0; i < o.nR; ++i) minus_MR[i] = First ? -one : -MR[i];
+  for (int64_t j = 0; j < o.nL; ++j) minus_ML[j] = First ? -one : -ML[j];
 
-  v4 G1[kMaxColumns * (kMaxColumns + 1) / 2] = {};
-  v4 r1[kMaxColumns] = {};
-  v4 G2[3] = {}, r2[2] = {}, yy = zero;
+  // Block 1 is accumulated as the Gram matrix of the extended rows [phi, yc], padded
+  // with zero columns to a multiple of 4 (`W`): its last row holds phi^T yc and yc^T yc.
+  // Rows are buffered `kBlock` samples at a time, then added in 2 x 4 register tiles,
+  // each tile's eight sums kept in registers over the block (a small syrk).
+  const int64_t W = (K + 1 + 3) / 4 * 4;
+  v4* G = scratch + 2 * n;        // W x W, lower part used
+  v4* rows_ = G + W * W;          // kBlock x W
+  for (int64_t i = 0; i < W * W; ++i) G[i] = zero;
+  for (int64_t i = 0; i < kBlock * W; ++i) rows_[i] = zero;
+  v4 G2[3] = {}, r2[2] = {};
   v4 v_past[kMaxLag] = {}, x_past[kMaxLag] = {};  // v(t-1), v(t-2), ...; x(t-1), ...
   v4 u_prev = zero, y_prev = zero;
-  v4 phi[kMaxColumns];
 
-  for (int64_t t = 0; t < n; ++t) {
+  for (int64_t t0 = 0; t0 < n; t0 += kBlock) {
+  const int64_t block = std::min<int64_t>(kBlock, n - t0);
+  for (int64_t t = t0; t < t0 + block; ++t) {
+    v4* phi = rows_ + (t - t0) * W;
     const v4 u_t = us[t], y_t = ys[t];
     v4 x_t;
     if (First) {
@@ -99,56 +117,44 @@ void group(const double* u, const double* y, const double* params, int64_t batch
       for (int64_t j = 0; j < o.p; ++j) x_t -= b[j] * x_past[j];
     }
     // eqs. 10-11 with mL = 1; the left line wins where both hold.
-    const v4 g1 = heaviside(x_t + cL - y_prev);
-    const v4 g2 = heaviside((y_prev - mR * x_t + mRcR) * inv_mR) * (one - g1);
-    const v4 yc = y_t - y_prev * (one - g1) * (one - g2);
-    // eq. 17, NS and LD columns, with u1 = u(t-1).
+    const m4 g1 = negative(x_t + cL - y_prev);
+    const m4 g2 = negative((y_prev - mR * x_t + mRcR) * inv_mR) & ~g1;
+    const v4 yc = y_t - keep(~(g1 | g2), y_prev);  // eq. 25
+    // eq. 17, NS and LD columns, with u1 = u(t-1), all carrying g1.
     const v4 u1 = u_prev;
     int64_t k = 0;
-    for (int64_t i = 0; i < o.nR; ++i) {
-      const v4 d = i == 0 ? zero : DR[i - 1];
-      phi[k++] = heaviside(d - u1) * u1;
-    }
-    for (int64_t i = 1; i < o.nR; ++i)
-      phi[k++] = -(First ? one : MR[i]) * heaviside(DR[i - 1] - u1);
-    for (int64_t j = 0; j < o.nL; ++j) {
-      const v4 d = j == 0 ? zero : DL[j - 1];
-      phi[k++] = heaviside(u1 - d) * u1;
-    }
-    for (int64_t j = 1; j < o.nL; ++j)
-      phi[k++] = -(First ? one : ML[j]) * heaviside(u1 - DL[j - 1]);
-    for (int64_t i = 2; i <= o.r; ++i) phi[k++] = v_past[i - 1];
-    for (int64_t j = 1; j <= o.p; ++j) phi[k++] = -x_past[j - 1];
-    for (int64_t c = 0; c < K - 1; ++c) phi[c] *= g1;
-    phi[K - 1] = g1;
-    // Block 1 (lower triangle, row-major) and its right-hand side.
-    int64_t e = 0;
-    for (int64_t c = 0; c < K; ++c) {
-      const v4 pc = phi[c];
-      for (int64_t d = 0; d <= c; ++d) G1[e++] += pc * phi[d];
-      r1[c] += pc * yc;
-    }
+    m4 right[kMaxColumns], left[kMaxColumns];  // h(DR_i - u1), h(u1 - DL_j), with g1
+    for (int64_t i = 0; i < o.nR; ++i) right[i] = negative((i == 0 ? zero : DR[i - 1]) - u1) & g1;
+    for (int64_t j = 0; j < o.nL; ++j) left[j] = negative(u1 - (j == 0 ? zero : DL[j - 1])) & g1;
+    for (int64_t i = 0; i < o.nR; ++i) phi[k++] = keep(right[i], u1);
+    for (int64_t i = 1; i < o.nR; ++i) phi[k++] = keep(right[i], minus_MR[i]);
+    for (int64_t j = 0; j < o.nL; ++j) phi[k++] = keep(left[j], u1);
+    for (int64_t j = 1; j < o.nL; ++j) phi[k++] = keep(left[j], minus_ML[j]);
+    for (int64_t i = 2; i <= o.r; ++i) phi[k++] = keep(g1, v_past[i - 1]);
+    for (int64_t j = 1; j <= o.p; ++j) phi[k++] = keep(g1, -x_past[j - 1]);
+    phi[K - 1] = keep(g1, one);
+    phi[K] = yc;
     // Block 2: columns x g2 and -g2.
-    const v4 q0 = x_t * g2, q1 = -g2;
+    const v4 q0 = keep(g2, x_t), q1 = keep(g2, -one);
     G2[0] += q0 * q0;
     G2[1] += q1 * q0;
     G2[2] += q1 * q1;
     r2[0] += q0 * yc;
     r2[1] += q1 * yc;
-    yy += yc * yc;
     // Advance the signals: v(t) = NS(u(t)) (eq. 1), or u(t) in the first iteration.
     v4 v_t;
     if (First) {
       v_t = u_t;
     } else {
+      // eq. 1: h(D - u)(u - D) = max(u - D, 0) on the right, min(u - D, 0) on the left
       v_t = zero;
       for (int64_t i = 0; i < o.nR; ++i) {
-        const v4 d = i == 0 ? zero : DR[i - 1];
-        v_t += MR[i] * heaviside(d - u_t) * (u_t - d);
+        const v4 d = u_t - (i == 0 ? zero : DR[i - 1]);
+        v_t += MR[i] * keep(negative(-d), d);
       }
       for (int64_t j = 0; j < o.nL; ++j) {
-        const v4 d = j == 0 ? zero : DL[j - 1];
-        v_t += ML[j] * heaviside(u_t - d) * (u_t - d);
+        const v4 d = u_t - (j == 0 ? zero : DL[j - 1]);
+        v_t += ML[j] * keep(negative(d), d);
       }
     }
     for (int64_t i = (o.r > 1 ? o.r : 1) - 1; i > 0; --i) v_past[i] = v_past[i - 1];
@@ -158,15 +164,38 @@ void group(const double* u, const double* y, const double* params, int64_t batch
     u_prev = u_t;
     y_prev = y_t;
   }
+  // The block's rows into the Gram matrix: tiles of rows (c, c + 1) x columns
+  // (d .. d + 3), for every tile that reaches the lower triangle.
+  for (int64_t c = 0; c < W; c += 2) {
+    for (int64_t d = 0; d <= c + 1 && d < W; d += 4) {
+      v4 s0[4], s1[4];
+      for (int j = 0; j < 4; ++j) {
+        s0[j] = G[c * W + d + j];
+        s1[j] = G[(c + 1) * W + d + j];
+      }
+      for (int64_t k = 0; k < block; ++k) {
+        const v4* row = rows_ + k * W;
+        const v4 x0 = row[c], x1 = row[c + 1];
+        for (int j = 0; j < 4; ++j) {
+          s0[j] += x0 * row[d + j];
+          s1[j] += x1 * row[d + j];
+        }
+      }
+      for (int j = 0; j < 4; ++j) {
+        G[c * W + d + j] = s0[j];
+        G[(c + 1) * W + d + j] = s1[j];
+      }
+    }
+  }
+  }
   for (int l = 0; l < kLanes && b0 + l < batch; ++l) {
     const int64_t b = b0 + l;
-    int64_t e = 0;
     for (int64_t c = 0; c < K; ++c) {
-      for (int64_t d = 0; d <= c; ++d, ++e) {
-        gram1[(b * K + c) * K + d] = G1[e][l];
-        gram1[(b * K + d) * K + c] = G1[e][l];
+      for (int64_t d = 0; d <= c; ++d) {
+        gram1[(b * K + c) * K + d] = G[c * W + d][l];
+        gram1[(b * K + d) * K + c] = G[c * W + d][l];
       }
-      rhs1[b * K + c] = r1[c][l];
+      rhs1[b * K + c] = G[K * W + c][l];
     }
     gram2[b * 4 + 0] = G2[0][l];
     gram2[b * 4 + 1] = G2[1][l];
@@ -174,7 +203,7 @@ void group(const double* u, const double* y, const double* params, int64_t batch
     gram2[b * 4 + 3] = G2[2][l];
     rhs2[b * 2 + 0] = r2[0][l];
     rhs2[b * 2 + 1] = r2[1][l];
-    ycc[b] = yy[l];
+    ycc[b] = G[K * W + K][l];
   }
 }
 
@@ -218,7 +247,7 @@ ffi::Error NormalEquationsImpl(ffi::Buffer<ffi::F64> u, ffi::Buffer<ffi::F64> y,
   const int64_t groups = (batch + kLanes - 1) / kLanes;
   const int64_t threads = thread_count(groups);
   auto work = [&](int64_t worker) {
-    std::vector<v4> scratch(2 * n);
+    std::vector<v4> scratch(2 * n + kMaxWidth * kMaxWidth + kBlock * kMaxWidth);
     for (int64_t g = worker; g < groups; g += threads) {
       auto run = first ? dispatch<true> : dispatch<false>;
       run(u.typed_data(), y.typed_data(), params.typed_data(), batch, n, o, g * kLanes,
