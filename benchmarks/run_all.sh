@@ -9,6 +9,7 @@ export JAXCASCADE_CACHE=${JAXCASCADE_CACHE:-off}   # compile times reported cold
 
 bench() {  # issue 6: throughput vs NumPy/SciPy and the FLOP floor; scaling
     jaxcascade bench --out results/bench.csv --json > results/bench.json
+    jaxcascade bench --backend xla --out results/bench_xla.csv --json > results/bench_xla.json
     python benchmarks/scaling.py --out results/scaling.csv
 }
 distributed() {  # issue 7: in-process vs 1 and 2 local Dask workers

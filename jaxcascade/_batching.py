@@ -16,9 +16,10 @@ import jax.numpy as jnp
 def chunked_vmap(fn, micro_batch: int, in_axes=0):
     """Like `jax.vmap(fn, in_axes)`, evaluated as `lax.map` over micro-batches.
 
-    The batch is padded to a multiple of `micro_batch` by repeating its last element
-    (results for the padding are dropped), so any batch size works and each micro-batch
-    has the same shape (one compilation).
+    The batch is split into the fewest micro-batches of at most `micro_batch` elements,
+    all of one size (one compilation), padded by repeating its last element (results
+    for the padding are dropped): 300 elements in micro-batches of at most 256 run as 2
+    of 150, not as 2 of 256.
     """
     batched = jax.vmap(fn, in_axes=in_axes)
 
@@ -26,8 +27,8 @@ def chunked_vmap(fn, micro_batch: int, in_axes=0):
         axes = in_axes if isinstance(in_axes, tuple | list) else (in_axes,) * len(args)
         mapped = [a for a, axis in zip(args, axes, strict=True) if axis is not None]
         size = jax.tree_util.tree_leaves(mapped)[0].shape[0]
-        chunk = max(1, min(micro_batch, size))
-        count = -(-size // chunk)
+        count = -(-size // max(1, min(micro_batch, size)))
+        chunk = -(-size // count)  # at most `micro_batch`, with the least padding
         pad = count * chunk - size
 
         def split(leaf):
