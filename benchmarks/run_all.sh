@@ -16,9 +16,12 @@ distributed() {  # issue 7: in-process vs 1 and 2 local Dask workers
     python benchmarks/distributed_throughput.py --realisations 2048 --n 2000 --workers 1,2 \
         --out results/distributed_throughput.csv
 }
-robust() {  # issue 4: literal vs robust, 100 realisations per cell (robust ~1 s per fit)
+robust() {  # issue 4: literal vs robust, 100 realisations per cell (robust ~2 s per fit),
+    # and a replicate on fresh records (seed 1)
     python benchmarks/robust_vs_literal.py --realisations 100 --chunk-size 8 --quiet \
         --out results/robust_vs_literal
+    python benchmarks/robust_vs_literal.py --realisations 100 --chunk-size 8 --seed 1 --quiet \
+        --out results/robust_vs_literal_seed1
 }
 sweeps() {  # issue 3: SNR x N sweeps of both paper examples, 500 realisations per cell
     for ex in 1 2; do

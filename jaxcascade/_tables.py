@@ -250,10 +250,13 @@ def compare(summary: pd.DataFrame, baseline: pd.DataFrame, threshold: float = 3.
 
 
 def run_metadata(spec, dtype, command: list[str] | None = None) -> dict:
-    """Versions, dtype, spec and command line, stored in the Parquet schema metadata."""
+    """Versions, dtype, how the literal iteration forms its normal equations (`fused` or
+    `xla`, same estimates up to rounding), spec and command line, stored in the Parquet
+    schema metadata."""
     import jax
 
     from . import __version__
+    from ._normal_equations import resolve
 
     return {
         "jaxcascade": __version__,
@@ -262,6 +265,7 @@ def run_metadata(spec, dtype, command: list[str] | None = None) -> dict:
         "pandas": pd.__version__,
         "python": sys.version.split()[0],
         "dtype": str(np.dtype(dtype)),
+        "normal_equations": resolve("auto", spec.orders, dtype),
         "spec": spec.to_dict(),
         "command": list(sys.argv if command is None else command),
     }

@@ -243,6 +243,7 @@ def test_killed_run_resumes_to_an_identical_table(tmp_path, capsys):
     meta = read_metadata(reference)
     assert meta["dtype"] == "float64" and meta["spec"]["snr"] == [25.0, 50.0]
     assert {"jaxcascade", "jax", "numpy", "command"} <= set(meta)
+    assert meta["normal_equations"] in ("fused", "xla")
 
     out = tmp_path / "killed.parquet"
     partial = tmp_path / "killed.parquet.partial"
