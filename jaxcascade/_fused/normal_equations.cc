@@ -241,7 +241,12 @@ ffi::Error NormalEquationsImpl(ffi::Buffer<ffi::F64> u, ffi::Buffer<ffi::F64> y,
   const auto dims = u.dimensions();
   if (dims.size() < 1) return ffi::Error::InvalidArgument("normal_equations: u needs an axis");
   const int64_t n = dims.back();
-  const int64_t batch = n == 0 ? 0 : static_cast<int64_t>(u.element_count()) / n;
+  if (n == 0) {  // an empty record: every sum is 0
+    for (auto* out : {&gram1, &rhs1, &gram2, &rhs2, &ycc})
+      std::fill_n((*out)->typed_data(), (*out)->element_count(), 0.0);
+    return ffi::Error::Success();
+  }
+  const int64_t batch = static_cast<int64_t>(u.element_count()) / n;
   if (params.dimensions().back() != size(o))
     return ffi::Error::InvalidArgument("normal_equations: parameter vector of the wrong size");
   const int64_t groups = (batch + kLanes - 1) / kLanes;
