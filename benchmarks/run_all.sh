@@ -22,6 +22,8 @@ robust() {  # issue 4: literal vs robust, 100 realisations per cell (robust ~2 s
         --out results/robust_vs_literal
     python benchmarks/robust_vs_literal.py --realisations 100 --chunk-size 8 --seed 1 --quiet \
         --out results/robust_vs_literal_seed1
+    python benchmarks/random_family_misses.py results/robust_vs_literal/random.parquet \
+        results/robust_vs_literal_seed1/random.parquet --out results/random_family_misses.csv
 }
 sweeps() {  # issue 3: SNR x N sweeps of both paper examples, 500 realisations per cell
     for ex in 1 2; do
