@@ -31,6 +31,7 @@ from jaxtyping import Array, Float
 from . import _fused
 from ._model import CascadeParams
 from ._regression import block_columns, regression, solve_gram
+from ._simulate import linear_block, pwl
 
 BACKENDS = ("auto", "xla", "fused")
 
@@ -74,8 +75,6 @@ def normal_equations(
         if first:
             reg = regression(params, u, y, u, y, unit_slopes=True)
         else:
-            from ._simulate import linear_block, pwl
-
             v = pwl(params, u)
             reg = regression(params, u, y, v, linear_block(params, v))
         one, two = reg.phi[:, : o.size - 2], reg.phi[:, o.size - 2 :]
