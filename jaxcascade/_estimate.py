@@ -10,9 +10,14 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
 from ._model import CascadeParams, Orders, is_admissible
-from ._normal_equations import normal_equations, resolve, solve_first, solve_step
-from ._regression import block_columns, regression, solve_normal_equations
-from ._simulate import linear_block, pwl
+from ._normal_equations import (
+    normal_equations,
+    resolve,
+    solve_first,
+    solve_step,
+    step_regression,
+)
+from ._regression import block_columns, solve_normal_equations
 from ._status import Status
 
 _RUNNING = -1
@@ -74,7 +79,7 @@ def first_step(init: CascadeParams, u, y, backend: str = "xla"):
         ne = normal_equations(init, u, y, first=True, backend="fused")
         coef, singular, cost = solve_first(ne, init, u.shape[0])
     else:
-        reg = regression(init, u, y, u, y, unit_slopes=True)
+        reg = step_regression(init, u, y, first=True)
         target = reg.yc - reg.phi[:, bl] @ init.to_theta()[bl]
         coef, singular, cost = solve_normal_equations(reg.phi[:, ns_ld], target)
     vector = jnp.concatenate([coef, init.to_vector()[bl]])
@@ -104,9 +109,7 @@ def voros_step(params: CascadeParams, u, y, backend: str = "xla"):
         ne = normal_equations(params, u, y, backend="fused")
         theta, singular, cost = solve_step(ne, u.shape[0])
     else:
-        v = pwl(params, u)
-        x = linear_block(params, v)
-        reg = regression(params, u, y, v, x)
+        reg = step_regression(params, u, y)
         theta, singular, cost = solve_normal_equations(
             reg.phi, reg.yc, blocks=params.orders.size - 2
         )

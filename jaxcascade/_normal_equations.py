@@ -30,7 +30,7 @@ from jaxtyping import Array, Float
 
 from . import _fused
 from ._model import CascadeParams
-from ._regression import block_columns, regression, solve_gram
+from ._regression import Regression, block_columns, regression, solve_gram
 from ._simulate import linear_block, pwl
 
 BACKENDS = ("auto", "xla", "fused")
@@ -56,6 +56,15 @@ def resolve(backend: str, orders, dtype) -> str:
     return backend
 
 
+def step_regression(params: CascadeParams, u, y, *, first: bool = False) -> Regression:
+    """The materialised regression of a step: v and x simulated from `params`, or, with
+    `first`, the paper's first iteration (v ~ u, x ~ y, unit slopes)."""
+    if first:
+        return regression(params, u, y, u, y, unit_slopes=True)
+    v = pwl(params, u)
+    return regression(params, u, y, v, linear_block(params, v))
+
+
 def normal_equations(
     params: CascadeParams,
     u: Float[Array, " T"],
@@ -72,11 +81,7 @@ def normal_equations(
     o = params.orders
     dtype = u.dtype
     if resolve(backend, o, dtype) == "xla":
-        if first:
-            reg = regression(params, u, y, u, y, unit_slopes=True)
-        else:
-            v = pwl(params, u)
-            reg = regression(params, u, y, v, linear_block(params, v))
+        reg = step_regression(params, u, y, first=first)
         one, two = reg.phi[:, : o.size - 2], reg.phi[:, o.size - 2 :]
         return NormalEquations(
             one.T @ one, one.T @ reg.yc, two.T @ two, two.T @ reg.yc, reg.yc @ reg.yc
@@ -125,7 +130,7 @@ def solve_first(ne: NormalEquations, init: CascadeParams, n: int):
     """`(coefficients, singular, cost)` of the first step: only the NS and LD columns, the
     backlash columns held at `init` and moved to the right-hand side."""
     o = init.orders
-    ns_ld, backlash = block_columns(o)
+    _, backlash = block_columns(o)
     m = o.size - 3  # NS and LD columns; column m of block 1 is the cL column
     held = init.to_theta()[backlash].astype(ne.rhs1.dtype)
     rhs = ne.rhs1[:m] - held[0] * ne.gram1[:m, m]
