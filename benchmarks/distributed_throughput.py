@@ -27,7 +27,7 @@ import time
 
 
 def _spec(realisations: int, n: int, chunk_size: int):
-    from jaxcascade._spec import Spec
+    from jaxcascade._montecarlo._spec import Spec
 
     return Spec(
         example=1,
@@ -40,7 +40,8 @@ def _spec(realisations: int, n: int, chunk_size: int):
 
 
 def in_process(spec) -> dict:
-    from jaxcascade._montecarlo import run, run_chunk
+    from jaxcascade._montecarlo._engine import run_chunk
+    from jaxcascade._montecarlo._run import run
 
     start = time.perf_counter()
     run_chunk(spec, spec.cells()[0], [0])
@@ -55,8 +56,8 @@ def in_process(spec) -> dict:
 def on_cluster(spec, workers: int) -> dict:
     import distributed
 
-    from jaxcascade._distributed import chunk_task
-    from jaxcascade._montecarlo import run
+    from jaxcascade._montecarlo._distributed import chunk_task
+    from jaxcascade._montecarlo._run import run
 
     with (
         distributed.LocalCluster(
@@ -101,7 +102,7 @@ def main(argv=None) -> int:
 
     import pandas as pd
 
-    from jaxcascade._bench import device_description
+    from jaxcascade._benchmark._timing import device_description
 
     spec = _spec(args.realisations, args.n, args.chunk_size)
     rows = [in_process(spec)]

@@ -14,8 +14,8 @@ import time
 
 import numpy as np
 
-from jaxcascade import _baseline
-from jaxcascade._bench import _example_vector, run_baseline
+from jaxcascade._benchmark import _baseline
+from jaxcascade._benchmark._timing import _example_vector, run_baseline
 from jaxcascade._examples import example
 
 

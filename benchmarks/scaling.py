@@ -23,7 +23,7 @@ _POINT = """
 import json, sys
 import jax
 jax.config.update("jax_enable_x64", True)
-from jaxcascade._bench import device_description, peak_rss_mb, run_jax
+from jaxcascade._benchmark._timing import device_description, peak_rss_mb, run_jax
 base = peak_rss_mb()
 realisations, n, iterations, repeats = map(int, sys.argv[1:])
 result = run_jax(realisations, n, iterations, repeats=repeats)

@@ -8,6 +8,7 @@ sentence saying what is wrong and what to do, before anything is computed or wri
 
 from __future__ import annotations
 
+import csv
 import dataclasses
 import difflib
 import os
@@ -18,6 +19,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 import scipy.signal
+
+from ._validate import MAX_MAGNITUDE
 
 _FORMATS = {".csv": "csv", ".txt": "csv", ".parquet": "parquet", ".pq": "parquet"}
 _SCALINGS = ("none", "standard", "scale")
@@ -393,6 +396,7 @@ def _format_of(path: str, format: str | None) -> str:
 
 
 def _read_frame(path: str, kind: str) -> pd.DataFrame:
+    _check_unique_header(path, kind)
     try:
         if kind == "csv":
             return pd.read_csv(path)
@@ -402,6 +406,28 @@ def _read_frame(path: str, kind: str) -> pd.DataFrame:
         raise ValueError(
             f"Could not read {path!r} as {kind.upper()} ({first}); check the file and its format."
         ) from error
+
+
+def _check_unique_header(path: str, kind: str) -> None:
+    # pandas renames a repeated CSV column ('y', 'y' -> 'y', 'y.1') and reads on: the
+    # header is read here first, so the user learns which column is meant twice.
+    try:
+        if kind == "csv":
+            with open(path, newline="", encoding="utf-8-sig", errors="replace") as file:
+                names = next(csv.reader(file), [])
+        else:
+            import pyarrow.parquet
+
+            names = pyarrow.parquet.read_schema(path).names
+    except Exception:  # an unreadable file: pandas reports it with its own sentence
+        return
+    # unnamed columns (an index written without a name) are pandas' to number
+    repeated = sorted({name for name in names if name and names.count(name) > 1})
+    if repeated:
+        raise ValueError(
+            f"{path!r} has repeated column names: {', '.join(map(repr, repeated))} (columns "
+            f"{', '.join(map(repr, names))}); give every column its own name."
+        )
 
 
 def _numeric_column(series: pd.Series, name: str, path: str) -> np.ndarray:
@@ -438,6 +464,14 @@ def _check_finite(values: np.ndarray, name: str, where: str) -> None:
         raise ValueError(
             f"{name!r} in {where!r} has {int(bad.sum())} NaN or infinite values, the first at "
             f"row {first} (counting data rows from 0); remove or fill them before loading."
+        )
+    huge = np.abs(values) > MAX_MAGNITUDE
+    if huge.any():
+        first = int(np.flatnonzero(huge)[0])
+        raise ValueError(
+            f"{name!r} in {where!r} reaches {float(np.max(np.abs(values))):.3g} (first beyond "
+            f"{MAX_MAGNITUDE:g} at row {first}), where squares overflow; rescale the record, "
+            "e.g. to other units."
         )
 
 

@@ -1,54 +1,125 @@
 """The effect library: extensions of the cascade that the model-error loop can add.
 
-An `Effect` is a model extension with its own parameters, a way to start them from a
-fitted model (its estimation hook), and a residual *signature*: the residual tests
-(names from `ResidualTests.tests()`) that fail when the effect is present but not
-modelled. The extended model is
+An `Effect` is an `eqx.Module` whose fields are its parameters. It changes the input
+before the cascade (`input`) or the output after it (`output`, which also sees the
+linear block's output x), so the extended model is
 
-    y = output_effects(cascade(input_effects(u)))
+    y = output_effects(cascade(input_effects(u)), x)
 
-with structural effects (`dynamics_order`, `pwl_segment`) changing the cascade's orders
-instead, and the noise model (`colored_noise`) acting on the residual only.
+Structural effects (`DynamicsOrder`, `PwlSegment`) have no parameters of their own: they
+change the cascade's orders. Every effect says how to start its parameters from a fitted
+model and its residual (`starts`, host side) and which residual tests fail when it is
+present but not modelled (`signature`, names from `ResidualTests.tests()`). Parameters
+named in `fixed` are held during refinement (an integer delay), the rest are refined
+with the cascade (`free_filter`, for `eqx.partition`). The noise model is its own type
+(`_noise.ARNoise`): it changes no simulated output.
+
+To add an effect: subclass `Effect` here and add it to `EFFECTS`.
 """
 
 from __future__ import annotations
 
 import dataclasses
+from typing import ClassVar
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Array, Float
 
 from ._model import CascadeParams, Orders
+from ._noise import ARNoise
 from ._simulate import signals
 
 
+class Effect(eqx.Module):
+    """Base class: an effect that changes nothing. Subclasses set the class variables,
+    declare their parameters as array fields, and override what they use."""
+
+    name: ClassVar[str] = ""
+    signature: ClassVar[tuple[str, ...]] = ()
+    description: ClassVar[str] = ""
+    fixed: ClassVar[tuple[str, ...]] = ()
+
+    def input(self, u):
+        return u
+
+    def output(self, y, x):
+        return y
+
+    def free_filter(self):
+        """`eqx.partition` filter: True for the parameters refined with the cascade."""
+        everything = jax.tree_util.tree_map(lambda _: True, self)
+        if not self.fixed:
+            return everything
+        return eqx.tree_at(
+            lambda e: tuple(getattr(e, f) for f in self.fixed),
+            everything,
+            replace=(False,) * len(self.fixed),
+        )
+
+    def parameters(self) -> dict[str, list | float]:
+        """`{field: value}` of one (unbatched) effect, for reports."""
+        return {
+            field.name: np.asarray(getattr(self, field.name)).tolist()
+            for field in dataclasses.fields(self)
+        }
+
+    @classmethod
+    def starts(cls, model: ExtendedModel, u, y, residual) -> list[Start]:
+        """Candidate starts for adding this effect to `model` (host side, numpy)."""
+        raise NotImplementedError
+
+
+@dataclasses.dataclass(frozen=True)
+class Start:
+    """Starting points of one candidate structure: `S` starts of equal shape.
+
+    - `label`: the candidate's name in reports (`name` or `name:variant`).
+    - `orders`: the cascade's orders with the effect (structural effects change them).
+    - `vectors`: `(S, P')` cascade parameters in `orders.names` order.
+    - `effect`: the effect with a leading axis `S` on every parameter.
+    """
+
+    label: str
+    orders: Orders
+    vectors: np.ndarray
+    effect: Effect
+
+
+def _repeat(model, count):
+    return np.repeat(np.asarray(model.params.to_vector())[None], count, 0)
+
+
+def _batched(effect_class, **values):
+    return effect_class(**{k: jnp.asarray(np.asarray(v, float)) for k, v in values.items()})
+
+
 class ExtendedModel(eqx.Module):
-    """A cascade plus effects.
+    """A cascade plus effects and a noise model.
 
     - `params`: the cascade (its orders include structural effects).
-    - `effects`: names of the added effects, in order (static).
-    - `free`: per effect, its continuous parameters (`Float[Array, " k"]`).
-    - `fixed`: per effect, parameters held during refinement (e.g. an integer delay).
-    - `noise`: AR coefficients `c` of the noise model `e(t) = w(t) + sum_i c_i e(t-i)`
-      (empty without `colored_noise`).
+    - `effects`: the added effects, in order.
+    - `noise`: the output noise model (white: order 0).
     """
 
     params: CascadeParams
-    free: tuple
-    fixed: tuple
-    noise: jax.Array
-    effects: tuple[str, ...] = eqx.field(static=True)
+    effects: tuple[Effect, ...]
+    noise: ARNoise
 
     @property
     def orders(self) -> Orders:
         return self.params.orders
 
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(effect.name for effect in self.effects)
+
 
 def plain(params: CascadeParams) -> ExtendedModel:
-    """The declared cascade with no effect added."""
-    return ExtendedModel(params, (), (), jnp.zeros((0,), params.mR.dtype), ())
+    """The declared cascade with no effect added and white noise."""
+    return ExtendedModel(params, (), ARNoise.white(params.mR.dtype))
 
 
 def simulate_extended(model: ExtendedModel, u):
@@ -58,59 +129,13 @@ def simulate_extended(model: ExtendedModel, u):
 
 def simulate_with_switches(model: ExtendedModel, u):
     """Simulated output and the backlash regime signals `(y, x, y_cascade)`."""
-    for name, free, fixed in zip(model.effects, model.free, model.fixed, strict=True):
-        u = EFFECTS[name].input(u, free, fixed)
+    for effect in model.effects:
+        u = effect.input(u)
     inner = signals(model.params, u)
     y = inner.y
-    for name, free, fixed in zip(model.effects, model.free, model.fixed, strict=True):
-        y = EFFECTS[name].output(y, free, fixed, inner.x)
+    for effect in model.effects:
+        y = effect.output(y, inner.x)
     return y, inner.x, inner.y
-
-
-def whiten(model: ExtendedModel, residual):
-    """The noise model's innovations `w(t) = e(t) - sum_i c_i e(t-i)` (identity without one)."""
-    q = model.noise.shape[0]
-    out = residual
-    for i in range(1, q + 1):
-        out = out - model.noise[i - 1] * jnp.concatenate(
-            [jnp.zeros((i,), residual.dtype), residual[:-i]]
-        )
-    return out
-
-
-@dataclasses.dataclass(frozen=True)
-class Start:
-    """Starting points of one candidate structure: a batch of `S` starts of equal shape."""
-
-    label: str
-    orders: Orders
-    vectors: np.ndarray  # (S, P') cascade parameters in `Orders.names` order
-    free: np.ndarray  # (S, k)
-    fixed: np.ndarray  # (S, m)
-
-
-class Effect:
-    """Base class: an effect that changes nothing. Subclasses override what they use."""
-
-    name: str = ""
-    signature: tuple[str, ...] = ()
-    description: str = ""
-    noise_model: bool = False
-
-    def input(self, u, free, fixed):
-        return u
-
-    def output(self, y, free, fixed, x):
-        return y
-
-    def starts(self, model: ExtendedModel, u, y, residual) -> list[Start]:
-        """Candidate starts for adding this effect to `model` (host side, numpy)."""
-        vector = np.asarray(model.params.to_vector())
-        free, fixed = self.initial(u, y, residual)
-        return [Start(self.name, model.orders, vector[None], free[None], fixed[None])]
-
-    def initial(self, u, y, residual) -> tuple[np.ndarray, np.ndarray]:
-        return np.zeros(0), np.zeros(0)
 
 
 class OutputOffset(Effect):
@@ -119,41 +144,56 @@ class OutputOffset(Effect):
     plus `d` is the backlash with gaps `cL + d`, `cR - d / mR`), so only a larger offset
     is an effect the declared model cannot already represent."""
 
-    name = "output_offset"
-    signature = ("mean",)
-    description = "constant offset added to the output: y + d"
+    name: ClassVar[str] = "output_offset"
+    signature: ClassVar[tuple[str, ...]] = ("mean",)
+    description: ClassVar[str] = "constant offset added to the output: y + d"
 
-    def output(self, y, free, fixed, x):
-        return y + free[0]
+    offset: Float[Array, ""]
 
-    def initial(self, u, y, residual):
-        return np.array([np.mean(residual)]), np.zeros(0)
+    def output(self, y, x):
+        return y + self.offset
+
+    @classmethod
+    def starts(cls, model, u, y, residual):
+        effect = _batched(cls, offset=[np.mean(residual)])
+        return [Start(cls.name, model.orders, _repeat(model, 1), effect)]
 
 
 class OutputDrift(Effect):
-    name = "output_drift"
-    signature = ("time",)
-    description = "linear drift of the output over the record: y + d t / 1000 (t in samples)"
+    name: ClassVar[str] = "output_drift"
+    signature: ClassVar[tuple[str, ...]] = ("time",)
+    description: ClassVar[str] = (
+        "linear drift of the output over the record: y + d t / 1000 (t in samples)"
+    )
 
-    def output(self, y, free, fixed, x):
-        return y + free[0] * jnp.arange(y.shape[0], dtype=y.dtype) / 1000.0
+    slope: Float[Array, ""]
 
-    def initial(self, u, y, residual):
+    def output(self, y, x):
+        return y + self.slope * jnp.arange(y.shape[0], dtype=y.dtype) / 1000.0
+
+    @classmethod
+    def starts(cls, model, u, y, residual):
         t = np.arange(len(residual)) / 1000.0
-        slope = np.polyfit(t, residual, 1)[0]
-        return np.array([slope]), np.zeros(0)
+        effect = _batched(cls, slope=[np.polyfit(t, residual, 1)[0]])
+        return [Start(cls.name, model.orders, _repeat(model, 1), effect)]
 
 
 class OutputSaturation(Effect):
-    name = "output_saturation"
-    signature = ("level", "regime", "u2_e", "u2_e2", "mean")
-    description = "output clipped to [lower, upper] (a sensor or actuator limit)"
+    name: ClassVar[str] = "output_saturation"
+    signature: ClassVar[tuple[str, ...]] = ("level", "regime", "u2_e", "u2_e2", "mean")
+    description: ClassVar[str] = "output clipped to [lower, upper] (a sensor or actuator limit)"
 
-    def output(self, y, free, fixed, x):
-        return jnp.clip(y, free[0], free[1])
+    lower: Float[Array, ""]
+    upper: Float[Array, ""]
 
-    def initial(self, u, y, residual):
-        return np.quantile(y, [0.005, 0.995]), np.zeros(0)
+    def output(self, y, x):
+        return jnp.clip(y, self.lower, self.upper)
+
+    @classmethod
+    def starts(cls, model, u, y, residual):
+        lower, upper = np.quantile(y, [0.005, 0.995])
+        effect = _batched(cls, lower=[lower], upper=[upper])
+        return [Start(cls.name, model.orders, _repeat(model, 1), effect)]
 
 
 class OutputFeedthrough(Effect):
@@ -164,45 +204,39 @@ class OutputFeedthrough(Effect):
     element, where the cascade alone gives the *play* (the slack position).
     """
 
-    name = "output_feedthrough"
-    signature = ("cross_correlation", "level", "regime", "u2_e")
-    description = "parallel linear path from x to the output: y + d x"
+    name: ClassVar[str] = "output_feedthrough"
+    signature: ClassVar[tuple[str, ...]] = ("cross_correlation", "level", "regime", "u2_e")
+    description: ClassVar[str] = "parallel linear path from x to the output: y + d x"
 
-    def output(self, y, free, fixed, x):
-        return y + free[0] * x
+    gain: Float[Array, ""]
 
-    def starts(self, model, u, y, residual):
-        vector = np.asarray(model.params.to_vector())
-        free = np.array([[-1.0], [-0.5], [0.5]])
-        return [
-            Start(self.name, model.orders, np.repeat(vector[None], 3, 0), free, np.zeros((3, 0)))
-        ]
+    def output(self, y, x):
+        return y + self.gain * x
+
+    @classmethod
+    def starts(cls, model, u, y, residual):
+        effect = _batched(cls, gain=[-1.0, -0.5, 0.5])
+        return [Start(cls.name, model.orders, _repeat(model, 3), effect)]
 
 
 class InputDelay(Effect):
-    name = "input_delay"
-    signature = ("cross_correlation", "autocorrelation")
-    description = "pure input delay of d samples: u(t - d)"
-    max_delay = 5
+    name: ClassVar[str] = "input_delay"
+    signature: ClassVar[tuple[str, ...]] = ("cross_correlation", "autocorrelation")
+    description: ClassVar[str] = "pure input delay of d samples: u(t - d)"
+    fixed: ClassVar[tuple[str, ...]] = ("delay",)
+    max_delay: ClassVar[int] = 5
 
-    def input(self, u, free, fixed):
-        d = fixed[0].astype(jnp.int32)
-        index = jnp.arange(u.shape[0]) - d
+    delay: Float[Array, ""]  # an integer, held fixed; one start per value
+
+    def input(self, u):
+        index = jnp.arange(u.shape[0]) - self.delay.astype(jnp.int32)
         return jnp.where(index >= 0, u[jnp.clip(index, 0, None)], 0.0)
 
-    def starts(self, model, u, y, residual):
-        vector = np.asarray(model.params.to_vector())
-        delays = np.arange(1, self.max_delay + 1, dtype=float)
-        count = len(delays)
-        return [
-            Start(
-                self.name,
-                model.orders,
-                np.repeat(vector[None], count, 0),
-                np.zeros((count, 0)),
-                delays[:, None],
-            )
-        ]
+    @classmethod
+    def starts(cls, model, u, y, residual):
+        delays = np.arange(1, cls.max_delay + 1, dtype=float)
+        effect = _batched(cls, delay=delays)
+        return [Start(cls.name, model.orders, _repeat(model, len(delays)), effect)]
 
 
 def _embed(params: CascadeParams, orders: Orders, values: dict) -> np.ndarray:
@@ -212,11 +246,12 @@ def _embed(params: CascadeParams, orders: Orders, values: dict) -> np.ndarray:
 
 
 class DynamicsOrder(Effect):
-    name = "dynamics_order"
-    signature = ("autocorrelation", "cross_correlation", "spectrum")
-    description = "one more pole (p + 1) or zero (r + 1) in the linear block"
+    name: ClassVar[str] = "dynamics_order"
+    signature: ClassVar[tuple[str, ...]] = ("autocorrelation", "cross_correlation", "spectrum")
+    description: ClassVar[str] = "one more pole (p + 1) or zero (r + 1) in the linear block"
 
-    def starts(self, model, u, y, residual):
+    @classmethod
+    def starts(cls, model, u, y, residual):
         o = model.orders
         starts = []
         for label, orders in (
@@ -224,21 +259,18 @@ class DynamicsOrder(Effect):
             ("zero", Orders(o.nR, o.nL, o.r + 1, o.p)),
         ):
             vector = _embed(model.params, orders, {})
-            starts.append(
-                Start(
-                    f"{self.name}:{label}", orders, vector[None], np.zeros((1, 0)), np.zeros((1, 0))
-                )
-            )
+            starts.append(Start(f"{cls.name}:{label}", orders, vector[None], cls()))
         return starts
 
 
 class PwlSegment(Effect):
-    name = "pwl_segment"
-    signature = ("level", "u2_e", "u2_e2", "cross_correlation")
-    description = "one more breakpoint (segment) in the static input nonlinearity"
-    quantiles = (0.2, 0.4, 0.6, 0.8)
+    name: ClassVar[str] = "pwl_segment"
+    signature: ClassVar[tuple[str, ...]] = ("level", "u2_e", "u2_e2", "cross_correlation")
+    description: ClassVar[str] = "one more breakpoint (segment) in the static input nonlinearity"
+    quantiles: ClassVar[tuple[float, ...]] = (0.2, 0.4, 0.6, 0.8)
 
-    def starts(self, model, u, y, residual):
+    @classmethod
+    def starts(cls, model, u, y, residual):
         o = model.orders
         p = model.params.to_dict()
         u = np.asarray(u)
@@ -253,7 +285,7 @@ class PwlSegment(Effect):
             old_M = [p[f"{M_name}{i}"] for i in range(1, n + 1)]
             part = u[u > 0] if side == "right" else -u[u < 0]
             vectors = []
-            for q in self.quantiles:
+            for q in cls.quantiles:
                 D = float(np.quantile(part, q)) * (1 if side == "right" else -1)
                 key = (lambda d: d) if side == "right" else (lambda d: -d)
                 j = sum(key(d) < key(D) for d in old_D)
@@ -262,128 +294,19 @@ class PwlSegment(Effect):
                 values = {f"{D_name}{i + 1}": v for i, v in enumerate(D_new)}
                 values.update({f"{M_name}{i + 1}": v for i, v in enumerate(M_new)})
                 vectors.append(_embed(model.params, orders, values))
-            count = len(vectors)
-            starts.append(
-                Start(
-                    f"{self.name}:{side}",
-                    orders,
-                    np.array(vectors),
-                    np.zeros((count, 0)),
-                    np.zeros((count, 0)),
-                )
-            )
+            starts.append(Start(f"{cls.name}:{side}", orders, np.array(vectors), cls()))
         return starts
 
 
-class ColoredNoise(Effect):
-    """Autoregressive output noise: explains a coloured residual that the input cannot.
-
-    It changes no simulated output; it is fitted to the residual by least squares
-    (order by BIC up to `max_order`) and whitens the residual the tests see.
-    """
-
-    name = "colored_noise"
-    signature = ("autocorrelation", "spectrum")
-    description = "autoregressive output noise e(t) = w(t) + c1 e(t-1) + ... + cq e(t-q)"
-    noise_model = True
-    max_order = 4
-
-    def fit(self, residual) -> tuple[np.ndarray, float]:
-        """AR coefficients by least squares with the order chosen by BIC, and the p-value
-        of the likelihood-ratio test against white noise."""
-        import scipy.stats
-
-        e = np.asarray(residual, dtype=float)
-        n = len(e)
-        best = (n * np.log(np.mean(e**2)), np.zeros(0), np.mean(e**2))
-        for q in range(1, self.max_order + 1):
-            X = np.stack([e[q - i : n - i] for i in range(1, q + 1)], axis=1)
-            c, *_ = np.linalg.lstsq(X, e[q:], rcond=None)
-            variance = np.mean((e[q:] - X @ c) ** 2)
-            bic = n * np.log(variance) + q * np.log(n)
-            if bic < best[0]:
-                best = (bic, c, variance)
-        q = len(best[1])
-        if q == 0:
-            return best[1], 1.0
-        statistic = n * np.log(np.mean(e**2) / best[2])
-        return best[1], float(scipy.stats.chi2.sf(statistic, q))
-
-
-EFFECTS: dict[str, Effect] = {
+EFFECTS: dict[str, type[Effect]] = {
     effect.name: effect
     for effect in (
-        OutputOffset(),
-        InputDelay(),
-        DynamicsOrder(),
-        PwlSegment(),
-        OutputSaturation(),
-        ColoredNoise(),
-        OutputDrift(),
-        OutputFeedthrough(),
+        OutputOffset,
+        InputDelay,
+        DynamicsOrder,
+        PwlSegment,
+        OutputSaturation,
+        OutputDrift,
+        OutputFeedthrough,
     )
 }
-
-
-# ---- records with an undeclared effect (tests and benchmarks/effects_loop.py) ----------
-
-
-def _example1():
-    from ._examples import example
-
-    return example(1).params()
-
-
-def _with_effect(name, free, fixed=()):
-    return ExtendedModel(
-        _example1(),
-        (jnp.asarray(free, float),),
-        (jnp.asarray(fixed, float),),
-        jnp.zeros((0,)),
-        (name,),
-    )
-
-
-def _changed(**values):
-    v = _example1().to_dict()
-    v.update(values)
-    return plain(CascadeParams.from_dict(v))
-
-
-def _extra_pole():
-    b = np.real(np.poly([0.5, 0.3 + 0.4j, 0.3 - 0.4j]))[1:]
-    return _changed(b1=b[0], b2=b[1], b3=b[2])
-
-
-# Example 1 (declared orders 2,2,2,2) with one effect present, and the AR coefficient of
-# the output noise (None: white). Sizes are identifiable: an output offset within the
-# backlash gaps is exactly a gap change (y + d is a backlash with cL + d, cR - d / mR),
-# so the offset here exceeds what the gaps can absorb.
-UNDECLARED = {
-    "output_offset": lambda: (_with_effect("output_offset", [0.6]), None),
-    "input_delay": lambda: (_with_effect("input_delay", [], [2]), None),
-    "dynamics_order": lambda: (_extra_pole(), None),
-    "pwl_segment": lambda: (_changed(DR2=1.5, MR3=1.5), None),
-    "output_saturation": lambda: (_with_effect("output_saturation", [-0.7, 0.9]), None),
-    "colored_noise": lambda: (plain(_example1()), 0.8),
-    "output_drift": lambda: (_with_effect("output_drift", [0.2]), None),
-    "output_feedthrough": lambda: (_with_effect("output_feedthrough", [-0.5]), None),
-    None: lambda: (plain(_example1()), None),
-}
-
-
-def undeclared_record(model: ExtendedModel, key, n: int, snr: float, ar=None):
-    """Input uniform in (-2, 2) and the model's output plus noise at amplitude SNR `snr`
-    (white, or AR(1) with coefficient `ar`, scaled to the same variance)."""
-    import scipy.signal
-
-    from ._simulate import uniform_input
-
-    k_input, k_noise = jax.random.split(key)
-    u = uniform_input(k_input, n)
-    y = simulate_extended(model, u)
-    e = np.asarray(jax.random.normal(k_noise, (n,)))
-    if ar is not None:
-        e = scipy.signal.lfilter([1.0], [1.0, -ar], e)
-    e = e / np.std(e) * float(jnp.std(y)) / snr
-    return u, y + jnp.asarray(e, y.dtype)

@@ -16,70 +16,96 @@
 from __future__ import annotations
 
 import dataclasses
-import functools
 
+import equinox as eqx
 import jax
+import jax.flatten_util
 import jax.numpy as jnp
 import numpy as np
 
 from ._diagnose import ResidualTests, regime_from_switches, residual_tests
-from ._effects import EFFECTS, ExtendedModel, Start, plain, simulate_with_switches, whiten
+from ._effects import EFFECTS, Effect, ExtendedModel, Start, plain, simulate_with_switches
+from ._efficiency import standard_errors
+from ._estimator._refine import from_unconstrained, least_squares, to_unconstrained
+from ._estimator._robust import Robust
+from ._metrics import score
 from ._model import CascadeParams, Orders
-from ._refine import from_unconstrained, least_squares, to_unconstrained
+from ._noise import ARNoise
 from ._simulate import backlash_switches, shift
+from ._validate import record
 
 
-@functools.partial(jax.jit, static_argnames=("effects", "orders", "max_steps"))
-def _refit(vectors, frees, fixeds, noise, u, y, *, effects, orders, max_steps):
-    """Output-error refit of one candidate structure from a batch of starts (`vmap`)."""
+@eqx.filter_jit
+def _refit(vectors, new: Effect, current: ExtendedModel, u, y, orders: Orders, max_steps: int):
+    """Output-error refit of the current model with `new` added, from a batch of starts
+    (`vmap` over `vectors` and the leading axis of `new`'s parameters). The cascade is
+    refined in its admissible parameterisation (`_estimator._refine`), every effect's
+    free parameters alongside; fixed ones (`Effect.fixed`) are held."""
     u_min, u_max = jnp.min(u), jnp.max(u)
     size = orders.size
 
-    def unpack(z, fixed):
-        params = from_unconstrained(z[:size], orders, u_min, u_max)
-        free, start = [], size
-        for f in frees:
-            free.append(z[start : start + f.shape[-1]])
-            start += f.shape[-1]
-        return ExtendedModel(params, tuple(free), tuple(fixed), noise, effects)
-
-    def one(vector, free, fixed):
+    def one(vector, effect):
+        effects = current.effects + (effect,)
+        free, fixed = eqx.partition(effects, tuple(e.free_filter() for e in effects))
+        flat, unravel = jax.flatten_util.ravel_pytree(free)
         params = CascadeParams.from_vector(vector, orders, check=False)
-        z0 = jnp.concatenate([to_unconstrained(params, u_min, u_max), *free])
+        z0 = jnp.concatenate([to_unconstrained(params, u_min, u_max), flat.astype(u.dtype)])
+
+        def unpack(z):
+            params = from_unconstrained(z[:size], orders, u_min, u_max)
+            effects = eqx.combine(unravel(z[size:]), fixed)
+            return ExtendedModel(params, tuple(effects), current.noise)
 
         def residual(z, args):
-            return simulate_with_switches(unpack(z, fixed), u)[0] - y
+            return simulate_with_switches(unpack(z), u)[0] - y
 
-        z, cost, status, steps = least_squares(residual, z0, None, max_steps=max_steps)
-        return unpack(z, fixed), cost, status
+        z, cost, status, _ = least_squares(residual, z0, None, max_steps=max_steps)
+        return unpack(z), cost, status
 
-    return jax.vmap(one)(vectors, frees, fixeds)
+    return eqx.filter_vmap(one)(vectors, new)
 
 
-def refit(model: ExtendedModel, name: str, start: Start, u, y, max_steps: int = 150):
-    """Add effect `name` to `model` from the starts `start`; the best start wins (host side)."""
+def refit(model: ExtendedModel, start: Start, u, y, max_steps: int = 150):
+    """Add `start.effect` to `model` from the starts `start`; the best start wins (host
+    side). Returns `(model, cost, status)`."""
     dtype = u.dtype
-    effects = model.effects + (name,)
-    count = start.vectors.shape[0]
-    frees = tuple(jnp.broadcast_to(jnp.asarray(f, dtype), (count,) + f.shape) for f in model.free)
-    fixeds = tuple(jnp.broadcast_to(jnp.asarray(f, dtype), (count,) + f.shape) for f in model.fixed)
-    frees += (jnp.asarray(start.free, dtype),)
-    fixeds += (jnp.asarray(start.fixed, dtype),)
+    effect = jax.tree_util.tree_map(lambda leaf: jnp.asarray(leaf, dtype), start.effect)
     models, costs, status = _refit(
-        jnp.asarray(start.vectors, dtype),
-        frees,
-        fixeds,
-        model.noise,
-        u,
-        y,
-        effects=effects,
-        orders=start.orders,
-        max_steps=max_steps,
+        jnp.asarray(start.vectors, dtype), effect, model, u, y, start.orders, max_steps
     )
     costs = np.asarray(costs)
     best = int(np.argmin(np.where(np.isfinite(costs), costs, np.inf)))
     chosen = jax.tree_util.tree_map(lambda leaf: leaf[best], models)
     return chosen, float(costs[best]), int(np.asarray(status)[best])
+
+
+def model_standard_errors(model: ExtendedModel, u, y) -> dict[str, float]:
+    """Estimated standard errors of every estimated parameter of `model` on the record
+    `(u, y)`: the cascade's (`Orders.names`) and each effect's free parameters
+    (`EFFECT.field`), from the output-error information at the estimate with the noise
+    model's whitening (`_efficiency.standard_errors`)."""
+    u = jnp.asarray(u)
+    y = jnp.asarray(y, u.dtype)
+    effects = model.effects
+    free, fixed = eqx.partition(effects, tuple(e.free_filter() for e in effects))
+    flat, unravel = jax.flatten_util.ravel_pytree(free)
+    size = model.orders.size
+    theta = jnp.concatenate([model.params.to_vector().astype(u.dtype), flat.astype(u.dtype)])
+
+    def simulate_theta(theta):
+        params = CascadeParams.from_vector(theta[:size], model.orders, check=False)
+        effects = tuple(eqx.combine(unravel(theta[size:]), fixed))
+        return simulate_with_switches(ExtendedModel(params, effects, model.noise), u)[0]
+
+    errors, _ = standard_errors(simulate_theta, theta, y, whiten=model.noise.innovations)
+    names = list(model.orders.names)
+    for effect in effects:
+        for field in dataclasses.fields(effect):
+            if field.name not in effect.fixed:
+                count = int(np.size(getattr(effect, field.name)))
+                suffixes = [""] if count == 1 else [f"[{i}]" for i in range(count)]
+                names += [f"{effect.name}.{field.name}{k}" for k in suffixes]
+    return dict(zip(names, np.asarray(errors, float).tolist(), strict=True))
 
 
 @dataclasses.dataclass
@@ -101,10 +127,8 @@ def evaluate(model: ExtendedModel, u, y, sample_period: float = 1.0) -> Evaluati
         x, np.asarray(shift(jnp.asarray(y_cascade), 1)), float(p.cL), float(p.mR), float(p.cR)
     )
     regime = regime_from_switches(np.asarray(g1), np.asarray(g2))
-    innovations = np.asarray(whiten(model, jnp.asarray(residual)))
-    error = float(np.sqrt(np.mean(residual**2)) / np.std(y))
-    if not np.isfinite(error):
-        error = float("inf")
+    innovations = np.asarray(model.noise.innovations(jnp.asarray(residual)))
+    error = score(y, y_sim)
     tests = residual_tests(u, innovations, regime, sample_period=sample_period)
     return Evaluation(residual, y_sim, error, tests)
 
@@ -155,15 +179,14 @@ class LoopResult:
     final: ExtendedModel
     added: list[str]
     candidates: list[Candidate]
-    noise_floor_hint: float | None = None
 
     def to_dict(self) -> dict:
         def params(model):
             out = {"cascade": model.params.to_dict(), "orders": str(model.orders)}
-            for name, free, fixed in zip(model.effects, model.free, model.fixed, strict=True):
-                out[name] = {"free": np.asarray(free).tolist(), "fixed": np.asarray(fixed).tolist()}
-            if model.noise.shape[0]:
-                out["colored_noise"] = {"ar": np.asarray(model.noise).tolist()}
+            for effect in model.effects:
+                out[effect.name] = effect.parameters()
+            if model.noise.order:
+                out[ARNoise.name] = {"ar": np.asarray(model.noise.coefficients).tolist()}
             return out
 
         return {
@@ -202,7 +225,8 @@ def model_error_loop(
 
     **Arguments:**
 
-    - `u_est`, `y_est`, `u_val`, `y_val`: 1-D arrays (model units).
+    - `u_est`, `y_est`, `u_val`, `y_val`: 1-D arrays (model units), each record at least
+      `orders.min_samples` long (`_validate.record`: a `ValueError` otherwise).
     - `orders`: declared orders of the cascade.
     - `base`: a fitted cascade to start from; by default the robust estimator fits one.
     - `t_threshold`, `min_gain`: a candidate is significant when its paired t statistic
@@ -212,17 +236,16 @@ def model_error_loop(
     - `effects`: names of the library to consider (default: all).
     """
     say = progress or (lambda message: None)
-    u_est, y_est = jnp.asarray(u_est), jnp.asarray(y_est, jnp.asarray(u_est).dtype)
+    u_est, y_est = record(u_est, y_est, orders=orders, where="model_error_loop (estimation)")
+    u_val, y_val = record(u_val, y_val, orders=orders, where="model_error_loop (validation)")
     u_val_np, y_val_np = np.asarray(u_val, float), np.asarray(y_val, float)
     if base is None:
-        from ._estimator._robust import robust
-
         say("fitting the declared cascade (robust estimator)")
-        base = jax.device_get(robust(u_est, y_est, orders).params)
+        base = jax.device_get(Robust()(u_est, y_est, orders).params)
     model = plain(base)
     current = evaluate(model, u_val_np, y_val_np, sample_period)
     before = current
-    names = tuple(effects or EFFECTS)
+    names = tuple(effects or (*EFFECTS, ARNoise.name))
     added: list[str] = []
     candidates: list[Candidate] = []
     for round_ in range(1, max_effects + 1):
@@ -235,12 +258,12 @@ def model_error_loop(
         residual_est = np.asarray(y_est) - y_sim_est
         round_candidates = []
         for name in names:
-            effect = EFFECTS[name]
-            if name in added or effect.noise_model:
+            if name in added or name not in EFFECTS:
                 continue
+            effect = EFFECTS[name]
             best = None
             for start in effect.starts(model, np.asarray(u_est), np.asarray(y_est), residual_est):
-                fitted, cost, status = refit(model, name, start, u_est, y_est)
+                fitted, cost, status = refit(model, start, u_est, y_est)
                 if best is None or cost < best[1]:
                     best = (fitted, cost, start.label)
             fitted, _, label = best
@@ -263,28 +286,25 @@ def model_error_loop(
                 f"{'significant' if candidate.significant else ''}"
             )
             round_candidates.append(candidate)
-        noise = EFFECTS["colored_noise"]
-        if "colored_noise" in names and "colored_noise" not in added:
-            coefficients, p_value = noise.fit(current.residual)
-            noise_model = ExtendedModel(
-                model.params, model.free, model.fixed, jnp.asarray(coefficients), model.effects
-            )
+        if ARNoise.name in names and ARNoise.name not in added:
+            noise, p_value = ARNoise.fit(current.residual)
+            noise_model = ExtendedModel(model.params, model.effects, noise)
             evaluation = evaluate(noise_model, u_val_np, y_val_np, sample_period)
             round_candidates.append(
                 Candidate(
                     round_,
-                    "colored_noise",
-                    f"colored_noise:AR({len(coefficients)})",
+                    ARNoise.name,
+                    f"{ARNoise.name}:AR({noise.order})",
                     evaluation.error,
                     0.0,
-                    bool(p_value < noise_alpha and len(coefficients)),
-                    bool(failed & set(noise.signature)),
+                    bool(p_value < noise_alpha and noise.order),
+                    bool(failed & set(ARNoise.signature)),
                     noise_model,
                     evaluation,
                 )
             )
         candidates += round_candidates
-        deterministic = [c for c in round_candidates if c.significant and c.name != "colored_noise"]
+        deterministic = [c for c in round_candidates if c.significant and c.name != ARNoise.name]
         if deterministic:
             chosen = min(deterministic, key=lambda c: (not c.signature_match, c.error))
         else:
@@ -293,7 +313,7 @@ def model_error_loop(
             noise_candidates = [
                 c
                 for c in round_candidates
-                if c.name == "colored_noise"
+                if c.name == ARNoise.name
                 and c.significant
                 and c.signature_match
                 and c.evaluation.tests.whiteness_ok

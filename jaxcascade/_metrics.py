@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import math
+
 import jax.numpy as jnp
+import numpy as np
 
 
 def nrmse(y_measured, y_simulated):
@@ -16,3 +19,13 @@ def nrmse(y_measured, y_simulated):
 def fit_percent(error):
     """MATLAB's fit percentage, `100 (1 - NRMSE)`."""
     return 100.0 * (1.0 - error)
+
+
+def score(y_measured, y_simulated) -> float:
+    """`nrmse` as a host float, `inf` when it is not finite (an estimate that blows up in
+    simulation is infinitely bad, never NaN): the one guard every report uses."""
+    # NumPy inputs are subtracted and squared by NumPy, which warns where a simulation
+    # overflowed: expected here, and answered with inf.
+    with np.errstate(over="ignore", invalid="ignore"):
+        error = float(nrmse(y_measured, y_simulated))
+    return error if math.isfinite(error) else math.inf

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping
+from typing import ClassVar
 
 import equinox as eqx
 import jax
@@ -19,7 +20,16 @@ class Orders:
     - `nR`, `nL`: number of right / left segments of the piecewise-linear block (>= 1).
     - `r`: numerator order of the linear block, `A(q) = q^-1 + a2 q^-2 + ... + ar q^-r` (>= 1).
     - `p`: denominator order, `B(q) = b1 q^-1 + ... + bp q^-p` (>= 0).
+
+    The largest supported orders are `MAX_SEGMENTS` (8) segments per side and `MAX_LAG`
+    (16) for `r` and `p`: at most 64 parameters, so every allowed combination also fits
+    the fused kernel (`_fused`, 64 block-1 columns, lags up to 16). A record needs at
+    least `min_samples` samples, `SAMPLES_PER_PARAMETER` (10) per parameter.
     """
+
+    MAX_SEGMENTS: ClassVar[int] = 8
+    MAX_LAG: ClassVar[int] = 16
+    SAMPLES_PER_PARAMETER: ClassVar[int] = 10
 
     nR: int = 2
     nL: int = 2
@@ -27,10 +37,21 @@ class Orders:
     p: int = 2
 
     def __post_init__(self):
-        for field, low in (("nR", 1), ("nL", 1), ("r", 1), ("p", 0)):
+        limits = (
+            ("nR", 1, self.MAX_SEGMENTS),
+            ("nL", 1, self.MAX_SEGMENTS),
+            ("r", 1, self.MAX_LAG),
+            ("p", 0, self.MAX_LAG),
+        )
+        for field, low, high in limits:
             value = getattr(self, field)
-            if not isinstance(value, int | np.integer) or value < low:
+            if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < low:
                 raise ValueError(f"Order {field} must be an integer >= {low}, got {value!r}.")
+            if value > high:
+                raise ValueError(
+                    f"Order {field} = {value} is above the largest supported, {high} "
+                    f"(nR, nL <= {self.MAX_SEGMENTS}; r, p <= {self.MAX_LAG})."
+                )
 
     @classmethod
     def parse(cls, text: str) -> Orders:
@@ -58,10 +79,62 @@ class Orders:
         """Number of free parameters (length of theta)."""
         return 2 * self.nR + 2 * self.nL - 2 + (self.r - 1) + self.p + 3
 
+    # ---- the parameter-vector layout (the one place it is written) --------------------
+
+    @property
+    def slices(self) -> dict[str, slice]:
+        """Where each field of `CascadeParams` sits in the vector (`names` order):
+        `MR`, `DR`, `ML`, `DL`, `a`, `b`, `cL`, `mR`, `cR` (the last three of length 1)."""
+        out, start = {}, 0
+        for field, length in zip(_ARRAY_FIELDS, self.lengths, strict=True):
+            out[field] = slice(start, start + length)
+            start += length
+        return out
+
+    @property
+    def lengths(self) -> tuple[int, ...]:
+        """Length of each field, in `_ARRAY_FIELDS` order."""
+        return (self.nR, self.nR - 1, self.nL, self.nL - 1, self.r - 1, self.p, 1, 1, 1)
+
+    @property
+    def static_dynamic(self) -> slice:
+        """The NS and LD parameters (the paper's first step estimates only these)."""
+        return slice(0, self.size - 3)
+
+    @property
+    def backlash(self) -> slice:
+        """The backlash parameters `cL`, `mR`, `cR` (`C = cR mR` in theta)."""
+        return slice(self.size - 3, self.size)
+
+    @property
+    def g1_columns(self) -> int:
+        """Number of regressor columns that carry g1 (NS, LD and cL): the first block of
+        the block-diagonal normal equations; the `mR` and `C` columns carry g2."""
+        return self.size - 2
+
+    @property
+    def breakpoints(self) -> tuple[int, ...]:
+        """Indices of the breakpoints `DR`, `DL` in the vector."""
+        s = self.slices
+        return tuple(range(s["DR"].start, s["DR"].stop)) + tuple(range(s["DL"].start, s["DL"].stop))
+
+    @property
+    def blocks(self) -> dict[str, tuple[str, ...]]:
+        """Parameter names per block of the cascade: NS, LD, ND."""
+        names, s = self.names, self.slices
+        return {
+            "NS": names[s["MR"].start : s["DL"].stop],
+            "LD": names[s["a"].start : s["b"].stop],
+            "ND": names[s["cL"].start :],
+        }
+
     @property
     def min_samples(self) -> int:
-        """Fewest samples for which the regression can be overdetermined."""
-        return 2 * self.size + max(self.r, self.p) + 1
+        """Fewest samples a record needs: `SAMPLES_PER_PARAMETER` per parameter. With
+        fewer the estimates are mostly noise and the iterations rarely settle, so the
+        work is refused up front; it also overdetermines the regression (which needs
+        `2 P + max(r, p) + 1 <= 10 P`)."""
+        return self.SAMPLES_PER_PARAMETER * self.size
 
     def __str__(self) -> str:
         return f"{self.nR},{self.nL},{self.r},{self.p}"
@@ -169,17 +242,14 @@ class CascadeParams(eqx.Module):
         may be inadmissible, which they then report through a status, not an exception.
         """
         o = orders
-        sizes = [o.nR, o.nR - 1, o.nL, o.nL - 1, o.r - 1, o.p]
         if jnp.shape(vector)[-1] != o.size:
             raise ValueError(
                 f"Parameter vector must have {o.size} entries for orders {o}, "
                 f"got {jnp.shape(vector)[-1]}."
             )
-        parts, start = [], 0
-        for size in sizes:
-            parts.append(vector[..., start : start + size])
-            start += size
-        parts += [vector[..., start], vector[..., start + 1], vector[..., start + 2]]
+        slices = o.slices
+        parts = [vector[..., slices[field]] for field in _ARRAY_FIELDS[:6]]
+        parts += [vector[..., slices[field].start] for field in _ARRAY_FIELDS[6:]]
         if check:
             return cls(*parts, o)
         self = object.__new__(cls)  # what equinox itself does when unflattening

@@ -30,7 +30,7 @@ from jaxtyping import Array, Float
 
 from . import _fused
 from ._model import CascadeParams
-from ._regression import Regression, block_columns, regression, solve_gram
+from ._regression import Regression, regression, solve_gram
 from ._simulate import linear_block, pwl
 
 BACKENDS = ("auto", "xla", "fused")
@@ -76,17 +76,13 @@ def normal_equations(
     """Normal equations of the step from `params` (module docstring).
 
     With `first`, the paper's first iteration: v ~ u, x ~ y and unit slopes in the
-    breakpoint columns (`_estimate.first_step`).
+    breakpoint columns (`_estimator._literal.first_iteration`).
     """
     o = params.orders
     dtype = u.dtype
     if resolve(backend, o, dtype) == "xla":
-        reg = step_regression(params, u, y, first=first)
-        one, two = reg.phi[:, : o.size - 2], reg.phi[:, o.size - 2 :]
-        return NormalEquations(
-            one.T @ one, one.T @ reg.yc, two.T @ two, two.T @ reg.yc, reg.yc @ reg.yc
-        )
-    k = o.size - 2
+        return from_regression(step_regression(params, u, y, first=first), o)
+    k = o.g1_columns
     shapes = (
         jax.ShapeDtypeStruct((k, k), dtype),
         jax.ShapeDtypeStruct((k,), dtype),
@@ -108,6 +104,15 @@ def normal_equations(
     return NormalEquations(*out)
 
 
+def from_regression(reg: Regression, orders) -> NormalEquations:
+    """The normal equations of materialised regressors (the `"xla"` implementation)."""
+    k = orders.g1_columns
+    one, two = reg.phi[:, :k], reg.phi[:, k:]
+    return NormalEquations(
+        one.T @ one, one.T @ reg.yc, two.T @ two, two.T @ reg.yc, reg.yc @ reg.yc
+    )
+
+
 def cost(ne: NormalEquations, theta: Float[Array, " P"], n: int) -> Float[Array, ""]:
     """The regression cost J = mean((yc - phi theta)^2) (eq. 28), from the normal
     equations: `(yc^T yc - 2 theta^T phi^T yc + theta^T phi^T phi theta) / n`, clipped at
@@ -119,21 +124,48 @@ def cost(ne: NormalEquations, theta: Float[Array, " P"], n: int) -> Float[Array,
 
 
 def solve_step(ne: NormalEquations, n: int):
-    """`(theta, singular, cost)` of a full step: both blocks solved (`solve_gram`)."""
-    theta1, singular1 = solve_gram(ne.gram1, ne.rhs1)
-    theta2, singular2 = solve_gram(ne.gram2, ne.rhs2)
+    """`(theta, singular, cost, inverse_diagonal)` of a full step: both blocks solved
+    (`solve_gram`); `inverse_diagonal` is the diagonal of `(phi^T phi)^-1`."""
+    theta1, singular1, inverse1 = solve_gram(ne.gram1, ne.rhs1)
+    theta2, singular2, inverse2 = solve_gram(ne.gram2, ne.rhs2)
     theta = jnp.concatenate([theta1, theta2])
-    return theta, singular1 | singular2, cost(ne, theta, n)
+    inverse = jnp.concatenate([inverse1, inverse2])
+    return theta, singular1 | singular2, cost(ne, theta, n), inverse
 
 
-def solve_first(ne: NormalEquations, init: CascadeParams, n: int):
-    """`(coefficients, singular, cost)` of the first step: only the NS and LD columns, the
-    backlash columns held at `init` and moved to the right-hand side."""
+FIRST_STEPS = ("full", "fixed", "drop")
+
+
+def solve_first(ne: NormalEquations, init: CascadeParams, n: int, reading: str = "full"):
+    """`(coefficients, singular, cost)` of the paper's first step: the NS and LD
+    coefficients, under one of three readings of the paper's text (`_estimate.voros`):
+
+    - `"full"`: the whole regression (eq. 27) is solved; only its NS and LD estimates
+      are kept (the backlash keeps its initial values);
+    - `"fixed"`: the backlash columns are held at `init` and moved to the right-hand side;
+    - `"drop"`: the backlash columns are left out.
+
+    `cost` is J (eq. 28) of the regression that was solved (`"drop"`: with the backlash
+    coefficients zero)."""
+    if reading not in FIRST_STEPS:
+        raise ValueError(
+            f"Unknown first-step reading {reading!r}; known: {', '.join(FIRST_STEPS)}."
+        )
     o = init.orders
-    _, backlash = block_columns(o)
-    m = o.size - 3  # NS and LD columns; column m of block 1 is the cL column
-    held = init.to_theta()[backlash].astype(ne.rhs1.dtype)
-    rhs = ne.rhs1[:m] - held[0] * ne.gram1[:m, m]
-    coefficients, singular = solve_gram(ne.gram1[:m, :m], rhs)
-    theta = jnp.concatenate([coefficients, held])
+    backlash = o.backlash
+    m = o.static_dynamic.stop  # NS and LD columns; column m of block 1 is the cL column
+    if reading == "full":
+        theta1, singular, _ = solve_gram(ne.gram1, ne.rhs1)
+        theta2, _, _ = solve_gram(ne.gram2, ne.rhs2)
+        # only block 1 (NS, LD, cL) feeds the kept estimates; a singular block 2 (no
+        # g2 = 1 with the initial backlash) is no reason to stop
+        return theta1[:m], singular, cost(ne, jnp.concatenate([theta1, theta2]), n)
+    if reading == "fixed":
+        held = init.to_theta()[backlash].astype(ne.rhs1.dtype)
+        rhs = ne.rhs1[:m] - held[0] * ne.gram1[:m, m]
+        coefficients, singular, _ = solve_gram(ne.gram1[:m, :m], rhs)
+        theta = jnp.concatenate([coefficients, held])
+        return coefficients, singular, cost(ne, theta, n)
+    coefficients, singular, _ = solve_gram(ne.gram1[:m, :m], ne.rhs1[:m])
+    theta = jnp.concatenate([coefficients, jnp.zeros((3,), coefficients.dtype)])
     return coefficients, singular, cost(ne, theta, n)

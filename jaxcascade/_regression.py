@@ -4,12 +4,11 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-import jax
 import jax.numpy as jnp
-import jax.scipy.linalg
 from jaxtyping import Array, Float
 
-from ._model import CascadeParams, Orders
+from . import _linalg
+from ._model import CascadeParams
 from ._simulate import backlash_switches, heaviside, shift
 
 
@@ -25,11 +24,6 @@ class Regression(NamedTuple):
     yc: Array
     g1: Array
     g2: Array
-
-
-def block_columns(orders: Orders) -> tuple[slice, slice]:
-    """Column ranges of theta: (NS and LD parameters, backlash parameters cL, mR, C)."""
-    return slice(0, orders.size - 3), slice(orders.size - 3, orders.size)
 
 
 def regression(
@@ -52,7 +46,7 @@ def regression(
       paper's first iteration.
     - `unit_slopes`: use M = 1 inside f1, f2. With the paper's all-zero initial slopes
       the breakpoint regressors `-f` vanish identically; with unit slopes the breakpoint
-      column's coefficient is `D * M` instead of `D` (see `estimate`).
+      column's coefficient is `D * M` instead of `D` (`_estimator._literal`).
     """
     o = params.orders
     dtype = u.dtype
@@ -105,7 +99,7 @@ def solve_normal_equations(
     parts = [phi] if blocks is None else [phi[:, :blocks], phi[:, blocks:]]
     thetas, flags = [], []
     for part in parts:
-        theta, singular = solve_gram(part.T @ part, part.T @ yc)
+        theta, singular, _ = solve_gram(part.T @ part, part.T @ yc)
         thetas.append(theta)
         flags.append(singular)
     theta = jnp.concatenate(thetas)
@@ -114,18 +108,37 @@ def solve_normal_equations(
 
 
 def solve_gram(gram, rhs):
-    """Solve `gram @ theta = rhs` (symmetric positive semi-definite) with Jacobi scaling,
-    a Cholesky factorisation and a singularity flag; zeros when singular."""
+    """Solve `gram @ theta = rhs` (symmetric positive semi-definite) with Jacobi scaling
+    and a Cholesky factorisation, and flag a singular system. Never raises, never NaN.
+
+    A singular system (a column identically zero: a regime or segment never active; or a
+    pivot of the scaled Cholesky factor below ~sqrt(1e4 eps): columns that are linearly
+    dependent at this estimate) still gets a solution, the one the paper's iteration can
+    go on from (`_estimator._literal.voros`): close to the minimum-norm least-squares
+    solution that `numpy.linalg.lstsq` gives, from a second Cholesky factorisation with a
+    ridge of `1e-8 max(diag gram)` on the unscaled diagonal (a direction the record does
+    not determine gets ~0, a determined one is changed by ~1e-8 relative). A ridge, not
+    an eigendecomposition: it costs one small factorisation per step. The algebra is
+    `_linalg`'s plain loops, not LAPACK (see there: batched LAPACK calls can deadlock).
+
+    **Returns:** `(theta, singular, inverse_diagonal)`, the last the diagonal of
+    `gram^-1` (the standard errors of a least-squares estimate are
+    `sigma sqrt(inverse_diagonal)`; of the regularised system when singular).
+    """
     eps = jnp.finfo(gram.dtype).eps
     d = jnp.sqrt(jnp.diagonal(gram))
     zero = d <= jnp.max(d) * eps
     d = jnp.where(zero, 1.0, d)
-    scaled = gram / (d[:, None] * d[None, :])
     identity = jnp.eye(gram.shape[0], dtype=gram.dtype)
-    factor = jnp.linalg.cholesky(jnp.where(jnp.any(zero), identity, scaled))
-    pivots = jnp.diagonal(factor)
-    singular = jnp.any(zero) | ~jnp.all(jnp.isfinite(pivots)) | (jnp.min(pivots) ** 2 <= 1e4 * eps)
-    factor = jnp.where(singular, identity, factor)
-    z = jax.scipy.linalg.solve_triangular(factor, rhs / d, lower=True)
-    theta = jax.scipy.linalg.solve_triangular(factor.T, z, lower=False) / d
-    return jnp.where(singular, jnp.zeros_like(theta), theta), singular
+    scaled = gram / (d[:, None] * d[None, :])
+    scaled = jnp.where(zero[:, None] | zero[None, :], identity, scaled)
+    plain, ok = _linalg.cholesky(scaled)
+    pivots = jnp.diagonal(plain)
+    singular = jnp.any(zero) | ~ok | (jnp.min(pivots) ** 2 <= 1e4 * eps)
+    # the ridge in scaled variables: 1e-8 max(d)^2 / d_i^2 on the diagonal
+    ridged, _ = _linalg.cholesky(scaled + jnp.diag(1e-8 * (jnp.max(d) / d) ** 2))
+    factor = jnp.where(singular, ridged, plain)
+    factor = jnp.where(jnp.all(jnp.isfinite(factor)), factor, identity)
+    rhs = jnp.where(zero, 0.0, rhs)
+    theta = _linalg.cho_solve(factor, rhs / d) / d
+    return theta, singular, _linalg.inverse_diagonal(factor) / d**2

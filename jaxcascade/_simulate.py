@@ -9,6 +9,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float, PRNGKeyArray
 
 from ._model import CascadeParams
+from ._validate import record
 
 
 def heaviside(s):
@@ -125,15 +126,28 @@ class Signals(NamedTuple):
 
 
 def signals(params: CascadeParams, u: Float[Array, " T"]) -> Signals:
-    """Noise-free simulation returning v, x and y."""
+    """Noise-free simulation returning v, x and y (dtype follows a float `u`; `u` is
+    checked by `_validate.record`: one 1-D record of real, finite numbers)."""
+    u = _input(params, u, "signals")
     v = pwl(params, u)
     x = linear_block(params, v)
     return Signals(v, x, backlash(params, x))
 
 
-@jax.jit
+def _input(params, u, where: str):
+    if not isinstance(params, CascadeParams):
+        raise TypeError(f"{where}: params must be CascadeParams, got {type(params).__name__}.")
+    return record(u, where=where, cast=False)[0]
+
+
 def simulate(params: CascadeParams, u: Float[Array, " T"]) -> Float[Array, " T"]:
-    """Noise-free output y of the cascade for input u (dtype follows u)."""
+    """Noise-free output y of the cascade for input u (dtype follows a float `u`; `u` is
+    checked first, `_validate.record`)."""
+    return _simulate(params, _input(params, u, "simulate"))
+
+
+@jax.jit
+def _simulate(params: CascadeParams, u: Float[Array, " T"]) -> Float[Array, " T"]:
     return signals(params, u).y
 
 
@@ -155,10 +169,15 @@ def uniform_input(key: PRNGKeyArray, n: int, amplitude: float = 2.0, dtype=None)
     return jax.random.uniform(key, (n,), dtype, -amplitude, amplitude)
 
 
-@jax.jit
 def measure(
     key: PRNGKeyArray, params: CascadeParams, u: Float[Array, " T"], snr
 ) -> tuple[Float[Array, " T"], Float[Array, " T"]]:
-    """Simulate and add output noise; returns `(y_measured, y_noise_free)`."""
-    y = simulate(params, u)
+    """Simulate and add output noise; returns `(y_measured, y_noise_free)` (`u` checked
+    first, as in `simulate`)."""
+    return _measure(key, params, _input(params, u, "measure"), snr)
+
+
+@jax.jit
+def _measure(key, params, u, snr):
+    y = _simulate(params, u)
     return add_noise(key, y, snr), y

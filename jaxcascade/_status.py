@@ -9,15 +9,14 @@ import numpy as np
 
 class Status(enum.IntEnum):
     """Outcome of one fit, carried as an int32 array through `vmap` and into result tables.
+    `Status.X.message` says what it means in a sentence; `failure` whether the estimate
+    should not be used.
 
-    - `converged`: the change in the estimate fell below the tolerance.
-    - `max_iterations`: the iteration budget ran out before convergence.
-    - `diverged`: the estimate became non-finite or grew without bound.
-    - `singular`: the normal equations were (numerically) singular, e.g. a regime or a
-      segment never visited, so some parameters are not identifiable from this record.
-    - `left_domain`: an estimate left the model's domain (breakpoints unsorted or outside
-      the input range, `mR <= 0`, unstable linear block); the iteration stops there.
-    - `failed`: a numerical solver (e.g. output-error refinement) reported failure.
+    - `converged`, `cycled`: the estimate can be used (not a `failure`).
+    - `max_iterations`, `diverged`, `singular`, `left_domain`, `failed`: the algorithm
+      stopped without a usable estimate (see each `message`).
+    - `no_improvement`: a fit that ended where it started, or whose simulation explains
+      less than the output's mean does (robust).
     """
 
     converged = 0
@@ -26,6 +25,41 @@ class Status(enum.IntEnum):
     singular = 3
     left_domain = 4
     failed = 5
+    cycled = 6
+    no_improvement = 7
+
+    @property
+    def message(self) -> str:
+        return _MESSAGES[self]
+
+    @property
+    def failure(self) -> bool:
+        return self not in (Status.converged, Status.cycled)
+
+
+_MESSAGES = {
+    Status.converged: "the estimate stopped changing (within its tolerance)",
+    Status.max_iterations: "the iteration budget ran out before the estimate settled",
+    Status.diverged: "the estimate became non-finite or grew without bound",
+    Status.singular: (
+        "the normal equations were singular: a regime or segment the record never visits "
+        "leaves some parameters unidentifiable"
+    ),
+    Status.left_domain: (
+        "the estimate is outside the model's domain (breakpoints unsorted or outside the "
+        "input range, mR <= 0, or an unstable linear block)"
+    ),
+    Status.failed: "a numerical solver reported failure",
+    Status.no_improvement: (
+        "the fit explains none of the output: its simulation error is not below the "
+        "output's variance (NRMSE >= 1), or the estimate never moved from a start that "
+        "was no estimate itself"
+    ),
+    Status.cycled: (
+        "the paper's iteration settled into a short cycle between neighbouring estimates "
+        "(its amplitude is reported); not a failure"
+    ),
+}
 
 
 def status_names(codes) -> np.ndarray:

@@ -187,12 +187,24 @@ def theta(P: dict) -> np.ndarray:
 # ---- the estimator, eqs. 19-28 ---------------------------------------------------------
 
 
-def first_iteration(init: dict, u, y) -> dict:
-    """v ~ u, x ~ y, unit slopes in f1, f2, backlash held at init; D coefficients / new M."""
+def first_iteration(init: dict, u, y, reading: str = "full") -> dict:
+    """v ~ u, x ~ y, unit slopes in f1, f2; only the NS and LD estimates are kept (the
+    backlash keeps init); D coefficients / new M. The paper's text has three readings:
+
+    - "full": least squares on every column of eq. 27;
+    - "fixed": the backlash columns held at init, moved to the target;
+    - "drop": the backlash columns left out.
+    """
     phi, yc = regression(init, u, y, u, y, unit_slopes=True)
     held = theta(init)[-3:]  # cL, mR, C of the initial values
-    target = yc - phi[:, -3:] @ held
-    coef = np.linalg.lstsq(phi[:, :-3], target, rcond=None)[0]
+    if reading == "full":
+        coef = np.linalg.lstsq(phi, yc, rcond=None)[0][:-3]
+    elif reading == "fixed":
+        coef = np.linalg.lstsq(phi[:, :-3], yc - phi[:, -3:] @ held, rcond=None)[0]
+    elif reading == "drop":
+        coef = np.linalg.lstsq(phi[:, :-3], yc, rcond=None)[0]
+    else:
+        raise ValueError(reading)
     new = unpack(np.concatenate([coef, pack(init)[-3:]]), _orders_of(init))
     # the breakpoint columns used unit slopes, so their coefficients are D_i * M_{i+1}
     new["DR"] = [new["DR"][i] / new["MR"][i + 1] for i in range(len(new["DR"]))]
@@ -215,30 +227,25 @@ def _orders_of(P: dict) -> tuple[int, int, int, int]:
     return len(P["MR"]), len(P["ML"]), len(P["a"]) + 1, len(P["b"])
 
 
-def voros(u, y, orders, init, max_iterations: int = 50, tol: float = 1e-10):
-    """The literal iteration; returns (history, status).
+def voros(u, y, orders, init, max_iterations: int = 50, reading: str = "full"):
+    """The literal iteration for exactly `max_iterations` steps; returns the history.
 
-    `history[k]` is iterate k as a vector (row 0 = init). Stops when
-    max|theta_{s+1} - theta_s| <= tol (1 + max|theta_s|) (status "converged"), after
-    `max_iterations` steps ("max_iterations"), or at a non-finite step ("nonfinite",
-    the step not kept).
+    `history[k]` is iterate k as a vector (row 0 = init), or fewer rows if a step is
+    non-finite (that step not kept). The stopping rules are tested on their own.
     """
     P = unpack(init, orders)
     history = [pack(P)]
-    P = first_iteration(P, u, y)
+    P = first_iteration(P, u, y, reading)
     if not np.all(np.isfinite(pack(P))):
-        return np.array(history), "nonfinite"
+        return np.array(history)
     history.append(pack(P))
     while len(history) - 1 < max_iterations:
         new = full_iteration(P, u, y)
-        old_vector, new_vector = pack(P), pack(new)
-        if not np.all(np.isfinite(new_vector)):
-            return np.array(history), "nonfinite"
-        history.append(new_vector)
+        if not np.all(np.isfinite(pack(new))):
+            break
+        history.append(pack(new))
         P = new
-        if np.max(np.abs(new_vector - old_vector)) <= tol * (1 + np.max(np.abs(old_vector))):
-            return np.array(history), "converged"
-    return np.array(history), "max_iterations"
+    return np.array(history)
 
 
 # ---- random systems for the tests ------------------------------------------------------

@@ -12,8 +12,9 @@ import sys
 
 import pytest
 
-from jaxcascade import _flops, _fused
-from jaxcascade._bench import SUMMARY_KEYS
+from jaxcascade import _fused
+from jaxcascade._benchmark import _flops
+from jaxcascade._benchmark._timing import SUMMARY_KEYS
 from jaxcascade._cli import main
 from jaxcascade._model import Orders
 

@@ -134,7 +134,7 @@ def test_split_sizes_and_scaling():
         split_record(record, 1.0)
     with pytest.raises(ValueError, match="between 1 and 999"):
         split_record(record, 1000)
-    with pytest.raises(ValueError, match="fewer than the 27 that orders 2,2,2,2 need"):
+    with pytest.raises(ValueError, match="fewer than the 120 that orders 2,2,2,2 need"):
         split_record(record, 20, orders=ORDERS)
 
 
@@ -197,12 +197,12 @@ ERRORS = {
     "too few samples": (
         lambda p: _csv(p, _frame(n=20)),
         {"orders": ORDERS},
-        r"has 20 samples, fewer than the 27 that orders 2,2,2,2 need",
+        r"has 20 samples, fewer than the 120 that orders 2,2,2,2 need",
     ),
     "too few after decimation": (
         lambda p: _csv(p, _frame(n=500)),
         {"orders": ORDERS, "decimate": 20},
-        r"has 25 samples after decimation by 20, fewer than the 27",
+        r"has 25 samples after decimation by 20, fewer than the 120",
     ),
     "constant input": (
         lambda p: _csv(p, _with(_frame(), "u", slice(None), 1.5)),

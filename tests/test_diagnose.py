@@ -13,7 +13,7 @@ from jaxcascade._diagnose import (
     regime_from_switches,
     residual_tests,
 )
-from jaxcascade._diagnose_plot import plot_correlation, plot_groups, save_residual_figures
+from jaxcascade._plot._residuals import plot_correlation, plot_groups, save_residual_figures
 
 matplotlib.use("Agg")
 

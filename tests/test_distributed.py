@@ -19,9 +19,9 @@ import pandas as pd
 import pytest
 
 from jaxcascade._cli import main
-from jaxcascade._montecarlo import _identity, run
-from jaxcascade._spec import Spec
-from jaxcascade._tables import without_timing
+from jaxcascade._montecarlo._run import _identity, run
+from jaxcascade._montecarlo._spec import Spec
+from jaxcascade._montecarlo._tables import without_timing
 
 distributed = pytest.importorskip("distributed", reason="Dask distributed is not installed")
 
@@ -87,9 +87,9 @@ def test_cli_sweep_on_the_cluster_equals_the_in_process_run(cluster, tmp_path, c
 
 
 def test_a_worker_running_other_code_is_refused(cluster, monkeypatch):
-    import jaxcascade._distributed
+    import jaxcascade._montecarlo._distributed
 
-    monkeypatch.setattr(jaxcascade._distributed, "FINGERPRINT", "0.0.0+edited")
+    monkeypatch.setattr(jaxcascade._montecarlo._distributed, "FINGERPRINT", "0.0.0+edited")
     with pytest.raises(RuntimeError, match="other jaxcascade code"):
         run(tiny_spec(realisations=3, snr=[25.0], scheduler=cluster.scheduler_address))
 
@@ -140,7 +140,7 @@ def test_unreachable_scheduler_is_one_clear_error(tmp_path, capsys):
     argv = ["sweep", "--example", "1", "--n", str(N), "--realisations", "2"]
     out = tmp_path / "r.parquet"
     spec = tiny_spec(scheduler="tcp://127.0.0.1:9")  # discard port: nothing listens
-    from jaxcascade._distributed import distributed_chunks
+    from jaxcascade._montecarlo._distributed import distributed_chunks
 
     with pytest.raises(OSError, match="cannot reach the Dask scheduler"):
         next(distributed_chunks(spec, [(spec.cells()[0], [0])], np.float64, connect_timeout=2))

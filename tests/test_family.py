@@ -13,10 +13,11 @@ import pytest
 
 from jaxcascade._cli import main
 from jaxcascade._model import Orders
-from jaxcascade._montecarlo import _system_tag, cell_key, run, run_chunk
+from jaxcascade._montecarlo._engine import _system_tag, cell_key, run_chunk
+from jaxcascade._montecarlo._run import run
+from jaxcascade._montecarlo._spec import Spec
+from jaxcascade._montecarlo._tables import TIMING_COLUMNS, summarise, true_column, without_timing
 from jaxcascade._prior import random_system
-from jaxcascade._spec import Spec
-from jaxcascade._tables import TIMING_COLUMNS, summarise, true_column, without_timing
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 N = 300

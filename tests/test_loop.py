@@ -16,15 +16,10 @@ import pytest
 import scipy.signal
 
 import jaxcascade as jc
-from jaxcascade._effects import (
-    EFFECTS,
-    UNDECLARED,
-    ExtendedModel,
-    simulate_extended,
-    undeclared_record,
-    whiten,
-)
+from jaxcascade._effects import EFFECTS, ExtendedModel, OutputOffset, simulate_extended
 from jaxcascade._loop import model_error_loop, paired_improvement
+from jaxcascade._noise import ARNoise
+from jaxcascade._testing import UNDECLARED, undeclared_record
 
 SNR = 20.0
 N = 2000
@@ -76,17 +71,17 @@ def test_offset_within_the_gaps_is_a_gap_change():
     shifted = jc.simulate(jc.CascadeParams.from_dict(v), u)
     # Both backlash states start at y = 0, so compare after the first move has
     # settled the state on a line.
-    offset = ExtendedModel(p, (jnp.array([d]),), (jnp.zeros(0),), jnp.zeros(0), ("output_offset",))
+    offset = ExtendedModel(p, (OutputOffset(jnp.asarray(d)),), ARNoise.white())
     with_offset = simulate_extended(offset, u)
     start = int(np.argmax(np.abs(np.diff(np.asarray(shifted))) > 0)) + 5
     np.testing.assert_allclose(shifted[start:], with_offset[start:], atol=1e-12)
 
 
-def test_whiten_inverts_an_ar_filter():
+def test_innovations_invert_an_ar_filter():
     e = np.asarray(jax.random.normal(jax.random.PRNGKey(3), (1000,)))
     coloured = scipy.signal.lfilter([1.0], [1.0, -0.7, 0.2], e)
-    model = ExtendedModel(TRUTH(), (), (), jnp.array([0.7, -0.2]), ())
-    np.testing.assert_allclose(whiten(model, jnp.asarray(coloured)), e, atol=1e-12)
+    noise = ARNoise(jnp.array([0.7, -0.2]))
+    np.testing.assert_allclose(noise.innovations(jnp.asarray(coloured)), e, atol=1e-12)
 
 
 def test_paired_improvement_sign():
@@ -98,4 +93,5 @@ def test_paired_improvement_sign():
 
 
 def test_every_effect_of_the_library_has_an_undeclared_record():
-    assert set(EFFECTS) == {name for name in UNDECLARED if name is not None}
+    library = {*EFFECTS, ARNoise.name}
+    assert library == {name for name in UNDECLARED if name is not None}

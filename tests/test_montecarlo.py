@@ -17,9 +17,10 @@ import pandas as pd
 import pytest
 
 from jaxcascade._cli import main
-from jaxcascade._montecarlo import chunk_memory, run, run_chunk, run_realisation, summary_path
-from jaxcascade._spec import Cell, Spec
-from jaxcascade._tables import compare, read_metadata, summarise, without_timing
+from jaxcascade._montecarlo._engine import chunk_memory, run_chunk, run_realisation
+from jaxcascade._montecarlo._run import run, summary_path
+from jaxcascade._montecarlo._spec import Cell, Spec
+from jaxcascade._montecarlo._tables import compare, read_metadata, summarise, without_timing
 
 N = 300
 
@@ -308,7 +309,7 @@ def test_chunk_memory_grows_linearly_in_chunk_size_and_n():
 
 def test_plots_are_written(tmp_path):
     table = run(small_spec(snr=[25.0, 50.0]), progress=False)
-    from jaxcascade._plot import plot_sweep
+    from jaxcascade._plot._sweep import plot_sweep
 
     paths = plot_sweep(summarise(table), table, tmp_path, "demo")
     assert len(paths) == 6

@@ -8,7 +8,7 @@ import pytest
 
 import jaxcascade
 from jaxcascade import CascadeParams, Orders, Status, _fused, example, initial_guess, measure
-from jaxcascade._estimate import voros_step
+from jaxcascade._estimator._literal import voros_step
 from jaxcascade._normal_equations import normal_equations, resolve
 
 fused = pytest.mark.skipif(not _fused.available(), reason=f"no fused kernel: {_fused.reason()}")
@@ -67,7 +67,7 @@ def test_truth_is_a_fixed_point_of_the_fused_step(orders):
     u = rng.uniform(-2, 2, 1000)
     vector, (_, _, y) = oracle.identifiable_system(rng, orders, u)
     params = CascadeParams.from_vector(jnp.asarray(vector), orders)
-    new, singular, cost = voros_step(params, jnp.asarray(u), jnp.asarray(y), backend="fused")
+    new, singular, cost, _ = voros_step(params, jnp.asarray(u), jnp.asarray(y), backend="fused")
     assert not bool(singular)
     np.testing.assert_allclose(new, vector, rtol=0, atol=1e-10)
     # the cost comes from the normal equations: rounding of |yc|^2 / N, not of J

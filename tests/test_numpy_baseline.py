@@ -4,7 +4,8 @@ import jax
 import numpy as np
 import pytest
 
-from jaxcascade import _baseline, example, measure, simulate, uniform_input, voros
+from jaxcascade import Status, example, measure, simulate, uniform_input, voros
+from jaxcascade._benchmark import _baseline
 
 EX = example(1)
 PARAMS = EX.params()
@@ -42,7 +43,7 @@ def test_backlash_scan_equals_loop(mR):
 def test_voros_matches_jax(noisy, fixed, backend):
     u, y_measured, y = _record(2)
     y = y_measured if noisy else y
-    options = dict(max_iterations=20, tol=-1.0) if fixed else {}
+    options = dict(max_iterations=20, tol=-1.0, se_tol=-1.0, cost_tol=-1.0) if fixed else {}
     want = voros(u, y, EX.orders, backend=backend, **options)
     got = _baseline.voros(np.asarray(u), np.asarray(y), EX.orders, **options)
     assert got.status == int(want.status)
@@ -58,17 +59,20 @@ def test_voros_matches_jax(noisy, fixed, backend):
 
 
 def test_statuses_match_jax_on_short_records():
-    # N = 300 at SNR 10: some records run out of iterations, some turn singular or leave
-    # the domain; the baseline must stop at the same step with the same status.
+    # N = 400 at SNR 25: records end converged, cycled, diverged or out of iterations;
+    # the baseline must stop at the same step with the same status.
     seen = set()
-    for seed in range(12):
-        u, y, _ = _record(seed, n=300, snr=10.0)
-        want = voros(u, y, EX.orders, max_iterations=10)
-        got = _baseline.voros(np.asarray(u), np.asarray(y), EX.orders, max_iterations=10)
+    for seed in range(10):
+        u, y, _ = _record(seed, n=400, snr=25.0)
+        want = voros(u, y, EX.orders, max_iterations=25)
+        got = _baseline.voros(np.asarray(u), np.asarray(y), EX.orders, max_iterations=25)
         assert (got.status, got.iterations) == (int(want.status), int(want.iterations))
-        np.testing.assert_allclose(got.history, np.asarray(want.history), atol=1e-8)
+        # a diverging iteration amplifies the rounding of its steps
+        atol = 1e-5 if got.status in (Status.diverged, Status.singular) else 1e-8
+        np.testing.assert_allclose(got.history, np.asarray(want.history), atol=atol)
+        np.testing.assert_allclose(got.cycle_amplitude, float(want.cycle_amplitude), atol=1e-8)
         seen.add(got.status)
-    assert len(seen) >= 3
+    assert len(seen) >= 4, seen
 
 
 def test_simulation_matches_noise_free_record():

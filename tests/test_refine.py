@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import jaxcascade as jc
-from jaxcascade._refine import from_unconstrained, to_unconstrained
+from jaxcascade._estimator._refine import from_unconstrained, to_unconstrained
 
 
 @pytest.mark.parametrize("orders", [jc.Orders(), jc.Orders(3, 2, 3, 3), jc.Orders(1, 1, 1, 0)])
@@ -30,7 +30,7 @@ def test_every_unconstrained_vector_is_admissible(orders):
 def test_running_out_of_steps_is_max_iterations():
     # optimistix reports the outer loop's limit as `nonlinear_max_steps_reached`; it is
     # a budget, not a failure of the method, and must say so in the results table.
-    from jaxcascade._refine import refine
+    from jaxcascade._estimator._refine import refine
 
     truth = jc.example(1).params()
     u = jax.random.uniform(jax.random.PRNGKey(0), (400,), minval=-2.0, maxval=2.0)

@@ -74,3 +74,16 @@ def test_solver_matches_lstsq_and_flags_zero_column():
     phi[:, 2] = 0.0  # a regime never visited
     theta, singular, _ = solve_normal_equations(jnp.asarray(phi), jnp.asarray(yc))
     assert bool(singular) and np.all(np.isfinite(theta))
+    # a singular system gets (close to) the minimum-norm least-squares solution (what
+    # lstsq gives), from which the paper's iteration goes on; the ridge, 1e-8 of the
+    # largest column's squared norm, moves a coefficient by ~1e-8 (d_max / d_i)^2
+    # relative: up to 1e-4 for these column scales (1 to 100)
+    expected = np.linalg.lstsq(phi, yc, rcond=None)[0]
+    np.testing.assert_allclose(theta, expected, rtol=3e-4, atol=1e-12)
+
+    phi[:, 3] = phi[:, 0] + 2 * phi[:, 1]  # linearly dependent columns
+    theta, singular, _ = solve_normal_equations(jnp.asarray(phi), jnp.asarray(yc))
+    assert bool(singular)
+    np.testing.assert_allclose(
+        theta, np.linalg.lstsq(phi, yc, rcond=None)[0], rtol=3e-4, atol=1e-12
+    )

@@ -38,17 +38,21 @@ result is never NaN; a start that fails is simply outranked.
 from __future__ import annotations
 
 import functools
+from typing import ClassVar
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float, PRNGKeyArray
 
-from .._estimate import Solution, initial_guess, voros
 from .._model import CascadeParams, Orders
 from .._prior import random_system
-from .._refine import refine, simulation_error
 from .._status import Status
+from .._validate import record
+from ._base import Estimator, setting
+from ._literal import initial_guess, voros
+from ._refine import refine, simulation_error
+from ._solution import Solution, finite
 
 
 def _best(costs, k):
@@ -60,19 +64,6 @@ def _take(tree, index):
     return jax.tree_util.tree_map(lambda leaf: leaf[index], tree)
 
 
-@functools.partial(
-    jax.jit,
-    static_argnames=(
-        "orders",
-        "n_starts",
-        "n_refine",
-        "subset",
-        "max_steps",
-        "literal_start",
-        "rtol",
-        "atol",
-    ),
-)
 def robust(
     u: Float[Array, " T"],
     y: Float[Array, " T"],
@@ -91,15 +82,67 @@ def robust(
 
     **Arguments:**
 
-    - `u`, `y`: `Float[Array, " T"]` input and measured output.
+    - `u`, `y`: `Float[Array, " T"]` input and measured output (lists and NumPy arrays
+      are converted, to the default float dtype; `_validate.record` says what is
+      refused, with a `ValueError` or `TypeError`, before anything is compiled).
     - `orders`: static model orders.
     - `key`: PRNG key for the starts; a fixed default keeps the estimator deterministic.
     - `rtol`, `atol`: Levenberg-Marquardt's termination tolerances (module docstring).
 
     **Returns:** a `Solution` whose `history` has three rows (chosen start, after the
     subset stage, final), `iterations` the Levenberg-Marquardt steps of the chosen
-    start over both stages, and `cost` the mean squared simulation error.
+    start over both stages, and `cost` the mean squared simulation error. The status is
+    `no_improvement` where the fit would otherwise count as usable but explains none of
+    the output (cost not below `var(y)`, NRMSE >= 1) or never moved from a random start
+    (`judge`).
     """
+    u, y = record(u, y, orders=orders, where="robust")
+    for name, value in (("n_starts", n_starts), ("n_refine", n_refine), ("subset", subset)):
+        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            raise ValueError(f"robust: {name} must be an integer >= 1, got {value!r}.")
+    return _robust(
+        u,
+        y,
+        orders,
+        key,
+        n_starts=n_starts,
+        n_refine=n_refine,
+        subset=subset,
+        max_steps=tuple(max_steps),
+        literal_start=literal_start,
+        rtol=rtol,
+        atol=atol,
+    )
+
+
+@functools.partial(
+    jax.jit,
+    static_argnames=(
+        "orders",
+        "n_starts",
+        "n_refine",
+        "subset",
+        "max_steps",
+        "literal_start",
+        "rtol",
+        "atol",
+    ),
+)
+def _robust(
+    u: Float[Array, " T"],
+    y: Float[Array, " T"],
+    orders: Orders,
+    key: PRNGKeyArray | None = None,
+    *,
+    n_starts: int = 16,
+    n_refine: int = 3,
+    subset: int = 1000,
+    max_steps: tuple[int, int] = (60, 150),
+    literal_start: bool = True,
+    rtol: float = 1e-6,
+    atol: float = 1e-9,
+) -> Solution:
+    # The jitted core of `robust`, which checks the record first.
     dtype = u.dtype
     y = y.astype(dtype)
     tolerances = {"rtol": rtol, "atol": atol}
@@ -109,11 +152,15 @@ def robust(
         jax.random.split(key, n_starts)
     )
     starts = CascadeParams.from_vector(
-        starts.to_vector().at[:, _breakpoint_columns(orders)].multiply(u_max), orders, check=False
+        starts.to_vector().at[:, jnp.array(orders.breakpoints, int)].multiply(u_max),
+        orders,
+        check=False,
     )
     if literal_start:
         init = initial_guess(orders, jnp.min(u), jnp.max(u), dtype)
-        literal = voros(u, y, orders, init, max_iterations=30).params.to_vector()
+        first_fit = voros(u, y, orders, init, max_iterations=30)
+        literal = first_fit.params.to_vector()
+        literal_usable = ~_failed(first_fit.status)
         starts = CascadeParams.from_vector(
             jnp.concatenate([starts.to_vector(), literal[None]]), orders, check=False
         )
@@ -151,15 +198,74 @@ def robust(
             final.params.to_vector(),
         ]
     )
-    return Solution(
+    # A start the fit may end on unmoved: the literal estimate, when it is one itself.
+    trusted = (chosen[best] == n_starts) & literal_usable if literal_start else False
+    solution = Solution(
         params=final.params,
         history=history,
         iterations=(first.steps[chosen[best]] + final.steps).astype(jnp.int32),
         cost=final.cost,
-        status=final.status,
+        status=judge(final.status, final.cost, y, history[0], history[-1], trusted, rtol),
+        cycle_amplitude=jnp.zeros((), dtype),
     )
+    return finite(solution, history[0])
 
 
-def _breakpoint_columns(orders: Orders):
-    names = orders.names
-    return jnp.array([i for i, name in enumerate(names) if name[:2] in ("DR", "DL")], int)
+def _failed(status):
+    return (status != Status.converged) & (status != Status.cycled)
+
+
+def judge(status, cost, y, start, estimate, trusted_start, rtol: float):
+    """The final status of a robust fit: `status`, unless it says the estimate is usable
+    while the fit explains none of the output (`cost`, the mean squared simulation error,
+    not below `var(y)`: NRMSE >= 1, or non-finite) or the estimate never moved (by more
+    than `rtol`, relative) from a start that was no estimate itself (`trusted_start`
+    False: a random draw, or a failed literal fit). Then `no_improvement`: the
+    restart of step 4 counts a fit that does not move as converged, which is right at
+    a minimum and wrong at a start Levenberg-Marquardt could not leave. Traceable.
+    """
+    explains = cost < jnp.var(y)
+    moved = jnp.max(jnp.abs(estimate - start) / (1 + jnp.abs(start))) > rtol
+    useless = ~explains | (~moved & ~jnp.asarray(trusted_start))
+    return jnp.where(~_failed(status) & useless, Status.no_improvement, status).astype(jnp.int32)
+
+
+class Robust(Estimator):
+    """Multi-start output-error least squares (`robust`, module docstring); the settings
+    are `robust`'s keyword arguments."""
+
+    name: ClassVar[str] = "robust"
+    summary: ClassVar[str] = "multi-start output-error Levenberg-Marquardt (admissible iterates)"
+
+    n_starts: int = setting(16)
+    n_refine: int = setting(3)
+    subset: int = setting(1000)
+    max_steps: tuple[int, int] = setting((60, 150))
+    literal_start: bool = setting(True)
+    rtol: float = setting(1e-6)
+    atol: float = setting(1e-9)
+
+    def __call__(
+        self,
+        u: Float[Array, " T"],
+        y: Float[Array, " T"],
+        orders: Orders,
+        *,
+        key: PRNGKeyArray | None = None,
+        input_range: tuple[float, float] | None = None,
+    ) -> Solution:
+        del input_range  # the starts are scaled to the record's own range
+        u, y = record(u, y, orders=orders, where="Robust")
+        return robust(
+            u,
+            y,
+            orders,
+            key,
+            n_starts=self.n_starts,
+            n_refine=self.n_refine,
+            subset=self.subset,
+            max_steps=self.max_steps,
+            literal_start=self.literal_start,
+            rtol=self.rtol,
+            atol=self.atol,
+        )

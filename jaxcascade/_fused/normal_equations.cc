@@ -15,6 +15,7 @@
 #include <algorithm>
 #include <cstdint>
 #include <cstdlib>
+#include <string>
 #include <thread>
 #include <vector>
 
@@ -220,6 +221,13 @@ void dispatch(const double* u, const double* y, const double* params, int64_t ba
     group<First>(u, y, params, batch, n, o, b0, scratch, gram1, rhs1, gram2, rhs2, ycc);
 }
 
+template <class Dims>
+std::string shape(const Dims& dims) {
+  std::string out = "(";
+  for (size_t i = 0; i < dims.size(); ++i) out += (i ? ", " : "") + std::to_string(dims[i]);
+  return out + (dims.size() == 1 ? ",)" : ")");
+}
+
 int64_t thread_count(int64_t groups) {
   int64_t threads = std::thread::hardware_concurrency();
   if (const char* env = std::getenv("JAXCASCADE_THREADS")) threads = std::atoll(env);
@@ -238,17 +246,38 @@ ffi::Error NormalEquationsImpl(ffi::Buffer<ffi::F64> u, ffi::Buffer<ffi::F64> y,
   if (nR < 1 || nL < 1 || r < 1 || p < 0 || r > kMaxLag || p > kMaxLag ||
       size(o) - 2 > kMaxColumns)
     return ffi::Error::InvalidArgument("normal_equations: unsupported orders");
+  // Every buffer's shape is checked against u's before anything is read or written: a
+  // mismatch (2-D arrays where one record is expected, y shorter than u, parameters of
+  // other orders) must be an error, not a read past a buffer's end.
   const auto dims = u.dimensions();
   if (dims.size() < 1) return ffi::Error::InvalidArgument("normal_equations: u needs an axis");
   const int64_t n = dims.back();
+  const auto ydims = y.dimensions();
+  if (ydims.size() != dims.size() || !std::equal(dims.begin(), dims.end(), ydims.begin()))
+    return ffi::Error::InvalidArgument("normal_equations: u and y must have the same shape, "
+                                       "got " + shape(dims) + " and " + shape(ydims));
+  const auto pdims = params.dimensions();
+  if (pdims.size() != dims.size() || pdims.back() != size(o) ||
+      !std::equal(dims.begin(), dims.end() - 1, pdims.begin()))
+    return ffi::Error::InvalidArgument(
+        "normal_equations: params must have shape (batch..., " + std::to_string(size(o)) +
+        ") for u of shape " + shape(dims) + ", got " + shape(pdims));
+  int64_t batch = 1;
+  for (size_t i = 0; i + 1 < dims.size(); ++i) batch *= dims[i];
+  const int64_t K = size(o) - 2;
+  if (gram1->element_count() != static_cast<size_t>(batch * K * K) ||
+      rhs1->element_count() != static_cast<size_t>(batch * K) ||
+      gram2->element_count() != static_cast<size_t>(batch * 4) ||
+      rhs2->element_count() != static_cast<size_t>(batch * 2) ||
+      ycc->element_count() != static_cast<size_t>(batch))
+    return ffi::Error::InvalidArgument(
+        "normal_equations: the results do not hold a batch of " + std::to_string(batch) +
+        " records of " + std::to_string(K) + " block-1 columns");
   if (n == 0) {  // an empty record: every sum is 0
     for (auto* out : {&gram1, &rhs1, &gram2, &rhs2, &ycc})
       std::fill_n((*out)->typed_data(), (*out)->element_count(), 0.0);
     return ffi::Error::Success();
   }
-  const int64_t batch = static_cast<int64_t>(u.element_count()) / n;
-  if (params.dimensions().back() != size(o))
-    return ffi::Error::InvalidArgument("normal_equations: parameter vector of the wrong size");
   const int64_t groups = (batch + kLanes - 1) / kLanes;
   const int64_t threads = thread_count(groups);
   auto work = [&](int64_t worker) {

@@ -1,4 +1,5 @@
-"""Plots of Monte-Carlo sweeps (matplotlib, imported lazily, Agg backend).
+"""Figures of Monte-Carlo sweeps (matplotlib's `Figure` API, imported lazily: no pyplot
+state, the user's backend untouched).
 
 Error bars are 95% Monte-Carlo intervals (1.96 standard errors). SNR axes drop
 `inf` (noise-free) cells; both SNR and N axes are logarithmic.
@@ -12,28 +13,22 @@ import pathlib
 import numpy as np
 import pandas as pd
 
+from .._montecarlo._tables import parameter_names, true_column, used_mask
+
 _Z = 1.96
 
 
-def _pyplot():
-    import matplotlib
+def _figure(**kwargs):
+    from matplotlib.figure import Figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
+    return Figure(layout="constrained", **kwargs)
 
 
-def _grid(plt, count: int, width: float = 3.4, height: float = 2.6):
+def _grid(count: int, width: float = 3.4, height: float = 2.6):
     columns = min(4, count)
     rows = math.ceil(count / columns)
-    fig, axes = plt.subplots(
-        rows,
-        columns,
-        figsize=(width * columns, height * rows),
-        squeeze=False,
-        constrained_layout=True,
-    )
+    fig = _figure(figsize=(width * columns, height * rows))
+    axes = fig.subplots(rows, columns, squeeze=False)
     for ax in axes.flat[count:]:
         ax.set_visible(False)
     return fig, axes.flat
@@ -45,6 +40,9 @@ def _log_axis(ax, values) -> None:
 
     values = sorted(set(float(v) for v in values))
     ax.set_xscale("log")
+    # explicit limits: a panel whose statistic is NaN everywhere (no admissible estimate
+    # in any cell) has no data limits of its own, and a log axis needs them
+    ax.set_xlim(values[0] / 1.25, values[-1] * 1.25)
     ax.set_xticks(values)
     ax.set_xticklabels([f"{v:g}" for v in values], fontsize=8)
     ax.xaxis.set_minor_formatter(NullFormatter())
@@ -55,11 +53,10 @@ def plot_statistic(summary: pd.DataFrame, statistic: str, against: str, path) ->
 
     One line per estimator and value of the other grid axis, with 95% MC error bars.
     """
-    plt = _pyplot()
     other = "n" if against == "snr" else "snr"
     data = summary[np.isfinite(summary[against].astype(float))]
     names = list(dict.fromkeys(data["parameter"]))
-    fig, axes = _grid(plt, len(names))
+    fig, axes = _grid(len(names))
     for ax, name in zip(axes, names, strict=False):
         rows = data[data["parameter"] == name]
         for (estimator, level), line in rows.groupby(["estimator", other], sort=True):
@@ -84,18 +81,17 @@ def plot_statistic(summary: pd.DataFrame, statistic: str, against: str, path) ->
     system = ", ".join(map(str, dict.fromkeys(data["system"])))
     fig.suptitle(f"{system}: {statistic} versus {'SNR' if against == 'snr' else 'N'} (95% MC bars)")
     fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def plot_convergence_rate(summary: pd.DataFrame, path) -> None:
     """Converged and recovered rates versus SNR, one line per estimator and N."""
-    plt = _pyplot()
     cells = summary.drop_duplicates(["system", "n", "snr", "estimator"])
     cells = cells[np.isfinite(cells["snr"].astype(float))]
-    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), constrained_layout=True)
+    fig = _figure(figsize=(10, 3.8))
+    axes = fig.subplots(1, 2)
     for ax, rate, title in (
         (axes[0], "converged_rate", "status converged"),
-        (axes[1], "recovered_rate", "converged and every parameter within 0.05"),
+        (axes[1], "recovered_rate", "every parameter within 0.05"),
     ):
         for (estimator, n), line in cells.groupby(["estimator", "n"], sort=True):
             line = line.sort_values("snr")
@@ -116,7 +112,6 @@ def plot_convergence_rate(summary: pd.DataFrame, path) -> None:
         ax.set_title(title, fontsize=10)
     axes[0].legend(fontsize=8)
     fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def plot_distributions(table: pd.DataFrame, path, n: int | None = None) -> None:
@@ -126,14 +121,12 @@ def plot_distributions(table: pd.DataFrame, path, n: int | None = None) -> None:
     For a family of systems (the truth varies by row) the errors `estimate - truth` are
     drawn instead, around a dashed zero.
     """
-    plt = _pyplot()
-    from ._tables import parameter_names, true_column, used_mask
 
     n = int(table["n"].max()) if n is None else n
     data = table[(table["n"].to_numpy() == n) & used_mask(table)]
     names = parameter_names(table)
     groups = list(data.groupby(["estimator", "snr"], sort=True))
-    fig, axes = _grid(plt, len(names), width=3.6)
+    fig, axes = _grid(len(names), width=3.6)
     for ax, name in zip(axes, names, strict=False):
         truth = table[true_column(name)].to_numpy()
         varying = not np.all(truth == truth[0])
@@ -160,7 +153,80 @@ def plot_distributions(table: pd.DataFrame, path, n: int | None = None) -> None:
         f"Distributions of the estimates, N = {n} (estimates used in the summary; dashed: truth)"
     )
     fig.savefig(path, dpi=110)
-    plt.close(fig)
+
+
+def plot_std_and_bound(summary: pd.DataFrame, against: str, path) -> None:
+    """The Monte-Carlo std of every parameter versus `against` (`n` or `snr`), log-log,
+    one line per estimator and level of the other axis (95% MC bars), with the
+    Cramér-Rao bound of the same cells as a dashed black line (`_efficiency`)."""
+    other = "n" if against == "snr" else "snr"
+    data = summary[np.isfinite(summary[against].astype(float))]
+    names = list(dict.fromkeys(data["parameter"]))
+    fig, axes = _grid(len(names))
+    for ax, name in zip(axes, names, strict=False):
+        rows = data[data["parameter"] == name]
+        for (estimator, level), line in rows.groupby(["estimator", other], sort=True):
+            line = line.sort_values(against)
+            label = f"{estimator}, {'N' if other == 'n' else 'SNR'} = {level:g}"
+            ax.errorbar(
+                line[against],
+                line["std"],
+                yerr=_Z * line["std_se"],
+                marker="o",
+                ms=3,
+                capsize=2,
+                lw=1,
+                label=label,
+            )
+        bound = rows.drop_duplicates([against, other]).sort_values(against)
+        for _, line in bound.groupby(other, sort=True):
+            ax.plot(line[against], line["crlb_std"], "k--", lw=0.9)
+        _log_axis(ax, rows[against])
+        ax.set_yscale("log")
+        ax.set_title(name, fontsize=10)
+        ax.set_xlabel("SNR" if against == "snr" else "N")
+    axes[0].plot([], [], "k--", lw=0.9, label="Cramér-Rao bound")
+    axes[0].legend(fontsize=7)
+    system = ", ".join(map(str, dict.fromkeys(data["system"])))
+    fig.suptitle(f"{system}: std versus {'SNR' if against == 'snr' else 'N'} and the bound")
+    fig.savefig(path, dpi=110)
+
+
+def plot_efficiency(summary: pd.DataFrame, path, n=None, snr=None) -> None:
+    """Efficiency (`crlb_std^2 / std^2`) per parameter as bars, one bar per estimator,
+    with 95% Monte-Carlo error bars, for one cell (default: the largest N and the SNR
+    closest to 25)."""
+    data = summary[np.isfinite(summary["efficiency"].astype(float))]
+    if n is None:
+        n = int(data["n"].max())
+    if snr is None:
+        snrs = data["snr"].unique()
+        snr = float(snrs[np.argmin(np.abs(np.log(snrs / 25.0)))])
+    cell = data[(data["n"] == n) & (data["snr"] == snr)]
+    names = list(dict.fromkeys(cell["parameter"]))
+    estimators = list(dict.fromkeys(cell["estimator"]))
+    fig = _figure(figsize=(max(6.0, 0.7 * len(names) * len(estimators)), 3.6))
+    ax = fig.add_subplot()
+    width = 0.8 / max(len(estimators), 1)
+    x = np.arange(len(names))
+    for k, estimator in enumerate(estimators):
+        rows = cell[cell["estimator"] == estimator].set_index("parameter").reindex(names)
+        ax.bar(
+            x + (k - (len(estimators) - 1) / 2) * width,
+            rows["efficiency"],
+            width,
+            yerr=_Z * rows["efficiency_se"],
+            capsize=2,
+            label=estimator,
+        )
+    ax.axhline(1.0, color="k", lw=0.8, ls="--")
+    ax.set_xticks(x)
+    ax.set_xticklabels(names, fontsize=8)
+    ax.set_ylabel("efficiency (bound variance / MC variance)")
+    ax.legend(fontsize=8)
+    system = ", ".join(map(str, dict.fromkeys(cell["system"])))
+    ax.set_title(f"{system}, N = {n}, SNR {snr:g} (95% MC bars)", fontsize=10)
+    fig.savefig(path, dpi=110)
 
 
 def plot_sweep(summary: pd.DataFrame, table: pd.DataFrame, folder, stem: str) -> list[pathlib.Path]:
@@ -179,4 +245,12 @@ def plot_sweep(summary: pd.DataFrame, table: pd.DataFrame, folder, stem: str) ->
     path = folder / f"{stem}_distributions.png"
     plot_distributions(table, path)
     paths.append(path)
+    if "efficiency" in summary and np.isfinite(summary["efficiency"].astype(float)).any():
+        for against in ("n", "snr"):
+            path = folder / f"{stem}_std_vs_{against}.png"
+            plot_std_and_bound(summary, against, path)
+            paths.append(path)
+        path = folder / f"{stem}_efficiency.png"
+        plot_efficiency(summary, path)
+        paths.append(path)
     return paths

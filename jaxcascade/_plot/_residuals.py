@@ -128,7 +128,7 @@ def plot_spectrum(test, axes=None):
 
 def plot_test(test):
     """A new figure for one test of a `ResidualTests`."""
-    from ._diagnose import CorrelationTest, DriftTest, GroupTest, SpectrumTest
+    from .._diagnose import CorrelationTest, DriftTest, GroupTest, SpectrumTest
 
     if isinstance(test, CorrelationTest):
         return plot_correlation(test)

@@ -8,40 +8,25 @@ after (`residual_before_*.png`, `residual_after_*.png`).
 
 from __future__ import annotations
 
-import json
 import pathlib
 import sys
 
 import numpy as np
 
-from ._arx import best_arx
-from ._data import read_record
-from ._metrics import fit_percent, nrmse
-
-
-def plot_compare(time, y, before, after, path, *, arx=None, title="") -> None:
-    """Measured versus simulated validation output, before and after the loop."""
-    from matplotlib.figure import Figure
-
-    figure = Figure(figsize=(12, 6.5), layout="constrained")
-    axes = figure.subplots(2, 1, sharex=True)
-    for ax, (label, simulated) in zip(axes, (("before", before), ("after", after)), strict=True):
-        ax.plot(time, y, color="0.3", lw=0.8, label="measured")
-        ax.plot(
-            time,
-            simulated,
-            lw=0.8,
-            label=f"cascade {label} ({fit_percent(nrmse(y, simulated)):.1f} % fit)",
-        )
-        if arx is not None:
-            ax.plot(
-                time, arx, lw=0.6, ls="--", label=f"ARX ({fit_percent(nrmse(y, arx)):.1f} % fit)"
-            )
-        ax.legend(loc="upper right", fontsize=8)
-        ax.set_ylabel("output")
-    axes[-1].set_xlabel("time" if time is not None else "sample")
-    figure.suptitle(title)
-    figure.savefig(path, dpi=110)
+from .._arx import best_arx
+from .._data import read_record
+from .._loop import model_error_loop
+from .._metrics import fit_percent, score
+from .._plot._loop import plot_compare
+from .._plot._residuals import save_residual_figures
+from ._common import (
+    CLIError,
+    add_record_arguments,
+    examples,
+    parse_orders,
+    strict_json,
+    writable_folder,
+)
 
 
 def _markdown(report: dict, command: str) -> str:
@@ -99,20 +84,18 @@ def _p(test) -> str:
 
 
 def run_loop(args) -> int:
-    from ._cli import CLIError, parse_orders, writable_folder
-    from ._diagnose_plot import save_residual_figures
-    from ._loop import model_error_loop
-
     orders = parse_orders(args.orders)
     if args.max_effects < 0:
         raise CLIError(f"--max-effects must be >= 0, got {args.max_effects}.")
+    if args.decimate < 1:
+        raise CLIError(f"--decimate must be an integer >= 1, got {args.decimate}.")
     options = dict(time_column=args.time, decimate=args.decimate, orders=orders)
     estimation = read_record(args.train, args.input, args.output, scaling=args.scaling, **options)
     validation = read_record(
         args.validate, args.input, args.output, scaling=estimation.scaling, **options
     )
     if args.report:
-        writable_folder(args.report)
+        writable_folder(args.report, "--report")
 
     def say(message):
         if not args.quiet:
@@ -134,12 +117,12 @@ def run_loop(args) -> int:
     full["arx"] = {
         "na": arx.orders[0],
         "nb": arx.orders[1],
-        "error": float(nrmse(validation.y, arx_val)),
+        "error": score(validation.y, arx_val),
     }
     full["records"] = {"estimation": estimation.to_dict(), "validation": validation.to_dict()}
     keys = ("error_before", "error_after", "effect_added", "candidates", "residual_tests")
     if args.json:
-        print(json.dumps({key: full[key] for key in keys}))
+        print(strict_json({key: full[key] for key in keys}))
     else:
         print(
             f"validation NRMSE before {full['error_before']:.4f}, after "
@@ -149,7 +132,7 @@ def run_loop(args) -> int:
     if args.report:
         folder = pathlib.Path(args.report)
         command = "jaxcascade loop " + " ".join(sys.argv[2:])
-        (folder / "report.json").write_text(json.dumps(full, indent=1))
+        (folder / "report.json").write_text(strict_json(full, indent=1))
         (folder / "report.md").write_text(_markdown(full, command))
         import pandas as pd
 
@@ -171,10 +154,18 @@ def run_loop(args) -> int:
 
 
 def add_parser(subparsers) -> None:
-    from ._cli import add_record_arguments
-
     parser = subparsers.add_parser(
-        "loop", help="fit, test the residual, add the missing effect, report before/after"
+        "loop",
+        help="fit, test the residual, add the missing effect, report before/after",
+        description=(
+            "The model-error loop: fit the declared cascade on TRAIN, test its residual "
+            "on the validation record, add the effect the residual points to, repeat."
+        ),
+        epilog=examples(
+            "jaxcascade loop train.csv --validate valid.csv --input u --output y",
+            "jaxcascade loop train.csv --validate valid.csv --input u --output y "
+            "--time t --decimate 4 --report results/loop",
+        ),
     )
     parser.add_argument("train", help="estimation record (CSV or Parquet)")
     parser.add_argument("--validate", required=True, help="validation record")

@@ -5,8 +5,13 @@
 index in the cell) and `key` (its PRNG key data as one uint64, enough to rerun it),
 `status` (a `Status` name), `iterations`, `cost` (the estimator's final cost),
 `nrmse` (validation NRMSE on a fresh record; `inf` for an inadmissible estimate),
-`admissible`, `recovered` (status converged and every parameter within `TOLERANCE`
-of the truth), one column per parameter with the estimate, `true_<name>` with the
+`admissible`, `recovered` (every parameter within `TOLERANCE` of the truth, whatever the
+status: a `cycled` fit at the statistical precision is recovered, and a status is a
+statement about the algorithm, not the estimate), `cycle_amplitude` (with status
+`cycled`, the largest spread of one parameter over the cycle; 0 otherwise), one column
+per parameter with the estimate, `crlb_<name>` with the record's own output-error
+Cramér-Rao bound on its standard deviation (`_efficiency.crlb`; 0 noise-free),
+`true_<name>` with the
 true value (the row's own for a family of systems), and the timing columns
 `fit_seconds` (compute seconds per fit of its chunk, compilation excluded) and
 `compile_seconds` (seconds its chunk spent compiling, 0 when cached); the timing
@@ -19,8 +24,10 @@ estimate is not a model, one blown-up realisation would otherwise swamp every mo
 and a fit that failed at its first step returns its initial values, which are no
 estimate at all (they would drag the mean toward the initial guess). Failures are not hidden:
 `count_<status>` counts every status, and the two rates use all realisations:
-`converged_rate` (status converged) and `recovered_rate` (converged and within
-`TOLERANCE`). Errors are taken against each row's truth, so for a family of systems
+`converged_rate` (status converged) and `recovered_rate` (within `TOLERANCE`, whatever
+the status); `cycle_amplitude_median` and `cycle_amplitude_max` describe the cycles of
+the `cycled` realisations (NaN without any). Errors are taken against each row's truth,
+so for a family of systems
 `bias` is the mean of `estimate - truth`, `std` the standard deviation of that error
 and `true`/`mean` the means of the truth and the estimates over the rows used; for a
 fixed system these are the usual moments of the estimate. Timing per cell:
@@ -28,6 +35,11 @@ fixed system these are the usual moments of the estimate. Timing per cell:
 time of a chunk: one compilation). Each statistic has its Monte-Carlo standard error (`*_se`):
 mean and bias `s / sqrt(m)`; std `s / sqrt(2 (m - 1))` (normal approximation);
 RMSE by the delta method, `sd(e^2) / (2 RMSE sqrt(m))`; rates `sqrt(p (1 - p) / count)`.
+Beside them, the output-error Cramér-Rao bound `crlb_std` (the realisation table's
+`crlb_<name>` columns hold each record's own bound; the cell's is the root of their
+mean square, `_efficiency`) and the efficiency `crlb_std^2 / std^2` (1: the estimator
+extracts all the information in the records), each with its standard error. The
+regression comparison (`compare`) looks at bias and std only.
 """
 
 from __future__ import annotations
@@ -39,7 +51,8 @@ import sys
 import numpy as np
 import pandas as pd
 
-from ._status import Status
+from .._status import Status, status_names
+from .._version import __version__
 
 CELL_COLUMNS = ["system", "n", "snr", "estimator"]
 TIMING_COLUMNS = ["fit_seconds", "compile_seconds"]
@@ -49,6 +62,10 @@ _METADATA_KEY = b"jaxcascade"
 
 def true_column(name: str) -> str:
     return f"true_{name}"
+
+
+def crlb_column(name: str) -> str:
+    return f"crlb_{name}"
 
 
 def parameter_names(table: pd.DataFrame) -> list[str]:
@@ -64,7 +81,6 @@ def without_timing(table: pd.DataFrame) -> pd.DataFrame:
 
 def realisation_frame(spec, cell, indices, outputs: dict) -> pd.DataFrame:
     """Rows of one chunk from the host arrays returned by the batched run."""
-    from ._status import status_names
 
     names = spec.orders.names
     estimates = np.asarray(outputs["estimate"], dtype=np.float64)
@@ -92,12 +108,17 @@ def realisation_frame(spec, cell, indices, outputs: dict) -> pd.DataFrame:
         "cost": np.asarray(outputs["cost"], dtype=np.float64),
         "nrmse": np.asarray(outputs["nrmse"], dtype=np.float64),
         "admissible": np.asarray(outputs["admissible"], dtype=bool),
-        "recovered": (status == Status.converged) & np.all(errors <= TOLERANCE, axis=1),
+        "recovered": np.all(errors <= TOLERANCE, axis=1),
+        "cycle_amplitude": np.asarray(outputs["cycle_amplitude"], dtype=np.float64),
     }
     for j, name in enumerate(names):
         columns[name] = estimates[:, j]
     for j, name in enumerate(names):
         columns[true_column(name)] = truth[:, j]
+    if "crlb" in outputs:
+        bounds = np.asarray(outputs["crlb"], dtype=np.float64).reshape(count, len(names))
+        for j, name in enumerate(names):
+            columns[crlb_column(name)] = bounds[:, j]
     for name in TIMING_COLUMNS:
         columns[name] = np.full(count, float(outputs.get(name, np.nan)))
     return pd.DataFrame(columns)
@@ -136,6 +157,7 @@ def summarise(table: pd.DataFrame) -> pd.DataFrame:
             "recovered_rate": recovered,
             "recovered_rate_se": recovered_se,
             "nrmse_median": float(np.median(group["nrmse"])) if count else float("nan"),
+            **_cycles(group),
             **_timing(group),
             **{f"count_{s.name}": int(np.sum(status == s.name)) for s in Status},
         }
@@ -171,10 +193,58 @@ def summarise(table: pd.DataFrame) -> pd.DataFrame:
                     "std_se": std / np.sqrt(2 * (m - 1)) if m > 1 else float("nan"),
                     "rmse": rmse,
                     "rmse_se": rmse_se,
+                    **_efficiency(group, name, std, m),
                     **per_cell,
                 }
             )
     return pd.DataFrame(rows)
+
+
+def _efficiency(group: pd.DataFrame, name: str, std: float, m: int) -> dict[str, float]:
+    """The cell's Cramér-Rao bound (the average of its records' per-record bound
+    variances, `_efficiency`) and the efficiency `crlb_std^2 / std^2`, each with its
+    Monte-Carlo standard error (delta method: the bound's from the spread of the
+    per-record bounds, the variance's `std^2 sqrt(2 / (m - 1))`). NaN where the table has
+    no bounds (written before them), noise-free (bound 0) or without estimates."""
+    nan = {"crlb_std": np.nan, "crlb_std_se": np.nan, "efficiency": np.nan, "efficiency_se": np.nan}
+    column = crlb_column(name)
+    if column not in group:
+        return nan
+    variances = group[column].to_numpy(np.float64) ** 2
+    variances = variances[np.isfinite(variances)]
+    if not variances.size:
+        return nan
+    bound_variance = float(np.mean(variances))
+    bound_variance_se = (
+        float(np.std(variances, ddof=1) / np.sqrt(variances.size)) if variances.size > 1 else 0.0
+    )
+    out = {
+        "crlb_std": np.sqrt(bound_variance),
+        "crlb_std_se": bound_variance_se / (2 * np.sqrt(bound_variance))
+        if bound_variance > 0
+        else 0.0,
+        "efficiency": np.nan,
+        "efficiency_se": np.nan,
+    }
+    if m > 1 and std > 0 and bound_variance > 0:
+        efficiency = bound_variance / std**2
+        relative = np.sqrt(2 / (m - 1) + (bound_variance_se / bound_variance) ** 2)
+        out.update(efficiency=efficiency, efficiency_se=efficiency * relative)
+    return out
+
+
+def _cycles(group: pd.DataFrame) -> dict[str, float]:
+    if "cycle_amplitude" not in group:  # a table written before the cycled status
+        amplitude = np.zeros(0)
+    else:
+        amplitude = group.loc[group["status"] == Status.cycled.name, "cycle_amplitude"]
+        amplitude = amplitude.to_numpy(np.float64)
+    if not amplitude.size:
+        return {"cycle_amplitude_median": np.nan, "cycle_amplitude_max": np.nan}
+    return {
+        "cycle_amplitude_median": float(np.median(amplitude)),
+        "cycle_amplitude_max": float(np.max(amplitude)),
+    }
 
 
 def _timing(group: pd.DataFrame) -> dict[str, float]:
@@ -249,14 +319,11 @@ def compare(summary: pd.DataFrame, baseline: pd.DataFrame, threshold: float = 3.
 # ---- Parquet with metadata -------------------------------------------------------------
 
 
-def run_metadata(spec, dtype, command: list[str] | None = None) -> dict:
-    """Versions, dtype, how the literal iteration forms its normal equations (`fused` or
-    `xla`, same estimates up to rounding), spec and command line, stored in the Parquet
-    schema metadata."""
+def run_metadata(spec, dtype, normal_equations: str, command: list[str] | None = None) -> dict:
+    """Versions, dtype, how the literal iteration formed its normal equations (`fused` or
+    `xla`, same estimates up to rounding, as the engine reports it), spec and command
+    line, stored in the Parquet schema metadata."""
     import jax
-
-    from . import __version__
-    from ._normal_equations import resolve
 
     return {
         "jaxcascade": __version__,
@@ -265,7 +332,7 @@ def run_metadata(spec, dtype, command: list[str] | None = None) -> dict:
         "pandas": pd.__version__,
         "python": sys.version.split()[0],
         "dtype": str(np.dtype(dtype)),
-        "normal_equations": resolve("auto", spec.orders, dtype),
+        "normal_equations": normal_equations,
         "spec": spec.to_dict(),
         "command": list(sys.argv if command is None else command),
     }

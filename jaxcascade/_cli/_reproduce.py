@@ -1,43 +1,39 @@
 """`jaxcascade reproduce`: the paper's examples, figures 6-8 and 11-13, and a table.
 
 One record of an example is simulated (input uniform in (-2, 2), output noise at the
-given SNR), the literal iteration is run from the paper's initial values, and the
-parameter trajectories are drawn per block as in the paper's figures.
+given SNR), fitted (default: the literal iteration from the paper's initial values), and
+the parameter trajectories are drawn per block as in the paper's figures.
 """
 
 from __future__ import annotations
 
-import json
 import pathlib
 
 import jax
-import numpy as np
 
-from ._estimate import Solution, initial_guess, voros
-from ._examples import Example, example
-from ._simulate import measure, uniform_input
-from ._status import Status
-
-_BLOCKS = {
-    "static nonlinearity (NS)": ("MR", "DR", "ML", "DL"),
-    "linear dynamics (LD)": ("a", "b"),
-    "backlash (ND)": ("cL", "mR", "cR"),
-}
+from .._estimator import ESTIMATORS, Solution, estimator
+from .._examples import Example, example
+from .._plot._trajectory import plot_trajectories
+from .._simulate import measure, uniform_input
+from .._status import Status
+from ._common import CLIError, estimator_help, examples, strict_json, writable_folder
 
 
 def run_example(
     ex: Example,
     seed: int = 0,
     snr: float | None = None,
-    max_iterations: int = 50,
     dtype=None,
-    estimator: str = "literal",
+    name: str = "literal",
+    **settings,
 ) -> tuple[Solution, dict]:
-    """Simulate one record of `ex` and fit it (default: the paper's iteration from the
-    paper's initial values; `estimator="robust"`: the multi-start output-error fit).
+    """Simulate one record of `ex` and fit it with the registered estimator `name`
+    (default: the paper's iteration from the paper's initial values).
 
     The input key and the noise key are the two halves of `PRNGKey(seed)`. `snr=inf`
-    gives a noise-free record. Returns the solution and the true values by name.
+    gives a noise-free record. The estimator is told the input distribution's range
+    (`input_range`), so the literal iteration starts from the paper's DR1 = 1, DL1 = -1.
+    Returns the solution and the true values by name.
     """
     dtype = dtype or jax.numpy.result_type(float)
     snr = ex.snr if snr is None else snr
@@ -45,13 +41,8 @@ def run_example(
     truth = ex.params(dtype)
     u = uniform_input(key_input, ex.n_samples, ex.amplitude, dtype)
     y, _ = measure(key_noise, truth, u, snr)
-    if estimator == "robust":
-        from ._estimator._robust import robust
-
-        solution = robust(u, y, ex.orders)
-    else:
-        init = initial_guess(ex.orders, -ex.amplitude, ex.amplitude, dtype)
-        solution = voros(u, y, ex.orders, init, max_iterations=max_iterations)
+    fit = estimator(name, **settings)
+    solution = fit(u, y, ex.orders, input_range=(-ex.amplitude, ex.amplitude))
     return jax.device_get(solution), truth.to_dict()
 
 
@@ -70,33 +61,6 @@ def estimates_table(solution: Solution, truth: dict):
     )
 
 
-def plot_convergence(solution: Solution, truth: dict, title: str, path) -> None:
-    """Parameter trajectories per block (the paper's Figs. 6-8 / 11-13) in one PNG."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    names = list(truth)
-    history = np.asarray(solution.history)
-    k = min(int(solution.iterations), history.shape[0] - 1)
-    history = history[: k + 1]
-    fig, axes = plt.subplots(1, 3, figsize=(14, 4.2), constrained_layout=True)
-    for ax, (block, prefixes) in zip(axes, _BLOCKS.items(), strict=True):
-        for index, name in enumerate(names):
-            if name.rstrip("0123456789") not in prefixes:
-                continue
-            (line,) = ax.plot(range(k + 1), history[:, index], marker=".", label=name)
-            ax.axhline(truth[name], color=line.get_color(), ls="--", lw=0.8)
-        ax.set_title(block)
-        ax.set_xlabel("iteration")
-        ax.set_ylabel("estimate")
-        ax.legend(fontsize=8, ncol=2)
-    fig.suptitle(title)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-
-
 def _markdown(table, header: str) -> str:
     lines = [header, "", "| parameter | true | estimate | error |", "|---|---|---|---|"]
     for row in table.itertuples():
@@ -107,8 +71,6 @@ def _markdown(table, header: str) -> str:
 
 
 def reproduce(args) -> int:
-    from ._cli import CLIError, writable_folder
-
     ex = example(args.example)
     if not args.snr > 0:
         raise CLIError(
@@ -119,9 +81,9 @@ def reproduce(args) -> int:
     out = pathlib.Path(args.out)
     writable_folder(out)
 
-    solution, truth = run_example(
-        ex, args.seed, args.snr, args.max_iterations, estimator=args.estimator
-    )
+    takes = "max_iterations" in ESTIMATORS[args.estimator].settings()
+    settings = {"max_iterations": args.max_iterations} if takes else {}
+    solution, truth = run_example(ex, args.seed, args.snr, name=args.estimator, **settings)
     status = Status(int(solution.status)).name
     iterations = int(solution.iterations)
     table = estimates_table(solution, truth)
@@ -134,20 +96,21 @@ def reproduce(args) -> int:
     )
     table.to_csv(out / f"{tag}_estimates.csv", index=False)
     header = (
-        f"## {title}\n\n{_DESCRIPTION[args.estimator]} "
+        f"## {title}\n\nEstimator `{args.estimator}`: {ESTIMATORS[args.estimator].summary}. "
         f"Command: `jaxcascade reproduce --example {ex.number} --seed {args.seed} "
         f"--snr {args.snr:g} --estimator {args.estimator} --out {args.out}`"
     )
     (out / f"{tag}_estimates.md").write_text(_markdown(table, header))
-    plot_convergence(solution, truth, title, out / f"{tag}_convergence.png")
+    plot_trajectories(solution, truth, title, out / f"{tag}_convergence.png")
 
     if args.json:
         print(
-            json.dumps(
+            strict_json(
                 {
                     "example": ex.number,
                     "iterations": iterations,
                     "status": status,
+                    "cycle_amplitude": float(solution.cycle_amplitude),
                     "estimates": solution.params.to_dict(),
                     "true": truth,
                 }
@@ -160,16 +123,7 @@ def reproduce(args) -> int:
     return 0
 
 
-_DESCRIPTION = {
-    "literal": "Literal iteration (paper eqs. 19-28) from the paper's initial values.",
-    "robust": "Robust estimator (multi-start output-error Levenberg-Marquardt); its "
-    "history rows are the chosen start, the subset stage and the final estimate.",
-}
-
-
 def _example_number(text: str) -> int:
-    from ._cli import CLIError
-
     if text not in ("1", "2"):
         raise CLIError(f"unknown example {text!r}; the paper has examples 1 and 2.")
     return int(text)
@@ -177,19 +131,33 @@ def _example_number(text: str) -> int:
 
 def add_parser(subparsers) -> None:
     parser = subparsers.add_parser(
-        "reproduce", help="rerun a paper example and draw its convergence figures"
+        "reproduce",
+        help="rerun a paper example and draw its convergence figures",
+        description=(
+            "Simulate one record of a paper example, fit it and draw the parameter "
+            "trajectories per block (the paper's figures 6-8 and 11-13) with a table."
+        ),
+        epilog=examples(
+            "jaxcascade reproduce --example 1",
+            "jaxcascade reproduce --example 2 --snr inf --estimator robust --out results/ex2",
+        ),
     )
     parser.add_argument("--example", type=_example_number, required=True, help="1 or 2")
     parser.add_argument("--seed", type=int, default=0, help="PRNG seed of the record (default 0)")
     parser.add_argument(
         "--snr", type=float, default=25.0, help="sqrt(var y / var e); inf = noise-free (default 25)"
     )
-    parser.add_argument("--max-iterations", type=int, default=50)
+    parser.add_argument(
+        "--max-iterations",
+        type=int,
+        default=50,
+        help="iteration budget of estimators that have one (default 50)",
+    )
     parser.add_argument(
         "--estimator",
-        choices=("literal", "robust"),
+        choices=tuple(ESTIMATORS),
         default="literal",
-        help="literal: the paper's iteration (default); robust: multi-start output error",
+        help=f"default literal; {estimator_help()}",
     )
     parser.add_argument("--out", default="results", help="output folder (default results/)")
     parser.add_argument("--json", action="store_true", help="print a JSON summary")

@@ -22,8 +22,8 @@ from typing import NamedTuple
 import numpy as np
 from scipy.signal import lfilter
 
-from ._model import Orders
-from ._status import Status
+from .._model import Orders
+from .._status import Status
 
 _RUNNING = -1
 
@@ -42,11 +42,10 @@ class Parts(NamedTuple):
 
 def unpack(vector, orders: Orders) -> Parts:
     """Split a vector in `Orders.names` order (ending in `cR`) into named parts."""
-    o = orders
     vector = np.asarray(vector, dtype=float)
-    bounds = np.cumsum([0, o.nR, o.nR - 1, o.nL, o.nL - 1, o.r - 1, o.p])
-    parts = [vector[lo:hi] for lo, hi in zip(bounds[:-1], bounds[1:], strict=True)]
-    return Parts(*parts, *vector[bounds[-1] : bounds[-1] + 3])
+    slices = orders.slices
+    arrays = [vector[slices[field]] for field in Parts._fields[:6]]
+    return Parts(*arrays, *(float(vector[slices[field]][0]) for field in Parts._fields[6:]))
 
 
 def shift(signal: np.ndarray, lag: int) -> np.ndarray:
@@ -143,15 +142,32 @@ def regression(vector, orders: Orders, u, y, v, x, *, unit_slopes: bool = False)
 def solve(phi: np.ndarray, yc: np.ndarray):
     """`argmin |yc - phi theta|` by `lstsq` on unit-norm columns, with the singularity rule
     of the JAX code (a zero column, or cond(Gram) > 1/(1e4 eps), i.e. cond(phi) > 1/(100
-    sqrt(eps))). Returns `(theta, singular, cost)`; theta is zero when singular."""
+    sqrt(eps))). Returns `(theta, singular, cost, inverse_diagonal)`. A singular problem
+    gets the JAX code's solution (`_regression.solve_gram`): a ridge of `1e-8 max(d)^2`
+    on the unscaled diagonal, close to the minimum-norm solution; `inverse_diagonal` is
+    `diag((phi^T phi)^-1)` (of the regularised system when singular)."""
+    if not (np.all(np.isfinite(phi)) and np.all(np.isfinite(yc))):  # an overflowed record
+        nan = np.full(phi.shape[1], np.nan)
+        return nan, True, float("inf"), nan
     eps = np.finfo(phi.dtype).eps
     d = np.linalg.norm(phi, axis=0)
     zero = d <= d.max() * eps
     d = np.where(zero, 1.0, d)
-    theta, _, _, sv = np.linalg.lstsq(phi / d, yc, rcond=None)
+    scaled = phi / d
+    theta, _, _, sv = np.linalg.lstsq(scaled, yc, rcond=None)
     singular = bool(zero.any() or sv[-1] <= sv[0] * 100 * np.sqrt(eps))
-    theta = np.zeros_like(theta) if singular else theta / d
-    return theta, singular, float(np.mean((yc - phi @ theta) ** 2))
+    if singular:  # the JAX code's ridge: 1e-8 max(d)^2 / d_i^2 on the scaled diagonal
+        gram = scaled.T @ scaled
+        gram[zero, :] = 0.0
+        gram[:, zero] = 0.0
+        gram[zero, zero] = 1.0
+        ridged = gram + np.diag(1e-8 * (d.max() / d) ** 2)
+        theta = np.linalg.solve(ridged, np.where(zero, 0.0, scaled.T @ yc)) / d
+        inverse = np.diag(np.linalg.inv(ridged)) / d**2
+    else:
+        theta = theta / d
+        inverse = np.diag(np.linalg.inv(scaled.T @ scaled)) / d**2
+    return theta, singular, float(np.mean((yc - phi @ theta) ** 2)), inverse
 
 
 def initial_guess(orders: Orders, u_min: float, u_max: float) -> np.ndarray:
@@ -175,31 +191,57 @@ def _safe_divide(num, den):
 
 
 def first_step(init: np.ndarray, orders: Orders, u, y):
-    """The paper's first iteration (see `jaxcascade._estimate.first_step`)."""
+    """The paper's first iteration, the `"full"` reading (`jaxcascade.voros`): the whole
+    regression with v ~ u, x ~ y; only the NS and LD estimates are kept."""
     o = orders
-    k = o.size - 3
+    k = o.static_dynamic.stop
     phi, yc = regression(init, o, u, y, u, y, unit_slopes=True)
-    theta_init = init.copy()
-    theta_init[-1] = init[-1] * init[-2]
-    coef, singular, cost = solve(phi[:, :k], yc - phi[:, k:] @ theta_init[k:])
-    vector = np.concatenate([coef, init[k:]])
-    MR, DR = slice(0, o.nR), slice(o.nR, 2 * o.nR - 1)
-    ML = slice(2 * o.nR - 1, 2 * o.nR - 1 + o.nL)
-    DL = slice(ML.stop, ML.stop + o.nL - 1)
+    g1 = o.g1_columns  # block 1: the NS, LD and cL columns (they carry g1)
+    theta1, singular, _, _ = solve(phi[:, :g1], yc)
+    theta2, _, _, _ = solve(phi[:, g1:], yc)
+    theta = np.concatenate([theta1, theta2])
+    cost = float(np.mean((yc - phi @ theta) ** 2))
+    vector = np.concatenate([theta1[:k], init[k:]])
+    s = o.slices
+    MR, DR, ML, DL = s["MR"], s["DR"], s["ML"], s["DL"]
     vector[DR] = _safe_divide(vector[DR], vector[MR][1:])
     vector[DL] = _safe_divide(vector[DL], vector[ML][1:])
     return vector, singular, cost
 
 
 def voros_step(vector: np.ndarray, orders: Orders, u, y):
-    """One full iteration: v, x from the estimate, then the full regression."""
+    """One full iteration: v, x from the estimate, then the full regression (its two
+    blocks, which have disjoint supports, solved apart). Returns `(vector, singular,
+    cost, standard_errors)`, the standard errors of theta (eq. 18 order). An estimate
+    with an unstable linear block overflows: the result is then non-finite (diverged),
+    as in the JAX code, without warnings."""
+    with np.errstate(all="ignore"):
+        return _voros_step(vector, orders, u, y)
+
+
+def _voros_step(vector: np.ndarray, orders: Orders, u, y):
     v = pwl(vector, orders, u)
     x = linear_block(vector, orders, v)
     phi, yc = regression(vector, orders, u, y, v, x)
-    theta, singular, cost = solve(phi, yc)
+    k = orders.g1_columns
+    theta1, singular1, _, inverse1 = solve(phi[:, :k], yc)
+    theta2, singular2, _, inverse2 = solve(phi[:, k:], yc)
+    theta = np.concatenate([theta1, theta2])
+    cost = float(np.mean((yc - phi @ theta) ** 2))
+    n = len(u)
+    se = np.sqrt(
+        np.maximum(cost * n / max(n - orders.size, 1) * np.concatenate([inverse1, inverse2]), 0)
+    )
+    new = theta.copy()
     with np.errstate(divide="ignore", invalid="ignore"):
-        theta[-1] = theta[-1] / theta[-2]  # C = cR mR -> cR
-    return theta, singular, cost
+        new[-1] = theta[-1] / theta[-2]  # C = cR mR -> cR
+    return new, singular1 or singular2, cost, se
+
+
+def _theta(vector: np.ndarray) -> np.ndarray:
+    out = np.array(vector, dtype=float)
+    out[..., -1] = out[..., -1] * out[..., -2]
+    return out
 
 
 def is_stable(b: np.ndarray) -> bool:
@@ -231,6 +273,7 @@ class BaselineSolution(NamedTuple):
     iterations: int
     cost: float
     status: int
+    cycle_amplitude: float
 
 
 def voros(
@@ -240,53 +283,80 @@ def voros(
     init: np.ndarray | None = None,
     *,
     max_iterations: int = 50,
-    tol: float = 1e-10,
+    tol: float = 1e-8,
+    se_tol: float = 1e-3,
+    cost_tol: float = 1e-12,
+    cycle_period: int = 8,
     divergence_bound: float = 1e6,
 ) -> BaselineSolution:
-    """The literal Vörös iteration in NumPy, with the stopping rules of `jaxcascade.voros`.
+    """The literal Vörös iteration in NumPy, with the stopping rules of `jaxcascade.voros`
+    (default first step, no domain stop): converged, cycled, max_iterations, diverged;
+    singular or left_domain judged on the final estimate.
 
-    `tol < 0` never reports convergence: exactly `max_iterations` steps unless one fails.
+    Negative tolerances never stop early: exactly `max_iterations` steps unless one
+    diverges.
     """
     u, y = np.asarray(u, dtype=float), np.asarray(y, dtype=float)
     u_min, u_max = float(u.min()), float(u.max())
     start = initial_guess(orders, u_min, u_max) if init is None else np.asarray(init, float)
 
-    def classify(new, singular):
-        if singular:
-            return Status.singular
+    def diverged(new, singular):
         if not np.all(np.isfinite(new)) or np.max(np.abs(new)) > divergence_bound:
-            return Status.diverged
-        return _RUNNING if is_admissible(new, orders, u_min, u_max) else Status.left_domain
+            return Status.singular if singular else Status.diverged
+        return None
 
     new, singular, cost = first_step(start, orders, u, y)
-    status = classify(new, singular)
-    accepted = status == _RUNNING
-    vector = new if accepted else start
-    if accepted and max_iterations <= 1:
-        status = Status.max_iterations
-    k = int(accepted)
+    status, amplitude = _RUNNING, 0.0
+    if diverged(new, singular) is not None:
+        status, vector, k = diverged(new, singular), start, 0
+    else:
+        vector, k = new, 1
+        if max_iterations <= 1:
+            status = Status.max_iterations
     history = np.tile(start, (max_iterations + 1, 1))
     history[1] = vector
     while status == _RUNNING:
-        new, singular, new_cost = voros_step(vector, orders, u, y)
-        status = classify(new, singular)
-        if status != _RUNNING:
+        new, new_singular, new_cost, se = voros_step(vector, orders, u, y)
+        if diverged(new, new_singular) is not None:
+            status = diverged(new, new_singular)
             break
-        change = np.max(np.abs(new - vector))
-        if change <= tol * (1 + np.max(np.abs(vector))):
-            status = Status.converged
-        elif k + 1 >= max_iterations:
-            status = Status.max_iterations
-        k, vector, cost = k + 1, new, new_cost
+        theta_new = _theta(new)
+        tolerance = se_tol * se + tol * (1 + np.abs(theta_new))
+        converged = bool(np.all(np.abs(theta_new - _theta(vector)) <= tolerance))
+        converged = converged or (
+            cost_tol >= 0 and cost > 0 and abs(new_cost - cost) <= cost_tol * cost
+        )
+        period = 0
+        if not converged:
+            for j in range(2, cycle_period + 1):
+                if k + 1 - j >= 1 and np.all(
+                    np.abs(theta_new - _theta(history[k + 1 - j])) <= tolerance
+                ):
+                    period = j
+                    break
+        k, vector, cost, singular = k + 1, new, new_cost, new_singular
         history[k] = new
+        if converged:
+            status = Status.converged
+        elif period:
+            status = Status.cycled
+            cycle = history[k + 1 - period : k + 1]
+            amplitude = float(np.max(cycle.max(axis=0) - cycle.min(axis=0)))
+        elif k >= max_iterations:
+            status = Status.max_iterations
+    if status in (Status.converged, Status.cycled, Status.max_iterations):
+        if singular:
+            status = Status.singular
+        if not is_admissible(vector, orders, u_min, u_max):
+            status = Status.left_domain
     history[k + 1 :] = vector
-    return BaselineSolution(vector, history, k, cost, int(status))
+    return BaselineSolution(vector, history, k, cost, int(status), amplitude)
 
 
 def fit(rng: np.random.Generator, vector, orders: Orders, n: int, snr: float, iterations: int):
     """One realisation of the benchmark workload: simulate, add noise, `iterations` steps."""
     u, y = measure(rng, vector, orders, n, snr)
-    return voros(u, y, orders, max_iterations=iterations, tol=-1.0)
+    return voros(u, y, orders, max_iterations=iterations, tol=-1.0, se_tol=-1.0, cost_tol=-1.0)
 
 
 def run(realisations: int, vector, orders: Orders, n: int, snr: float, iterations: int, seed=0):

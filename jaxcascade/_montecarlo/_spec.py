@@ -45,9 +45,9 @@ from typing import Any, NamedTuple
 
 import jax.numpy as jnp
 
-from ._estimators import accepted_settings, estimator
-from ._examples import EXAMPLES
-from ._model import CascadeParams, Orders
+from .._estimator import estimator
+from .._examples import EXAMPLES
+from .._model import CascadeParams, Orders
 
 INPUT_DISTRIBUTIONS = ("uniform",)
 # Families of systems: every realisation draws its own true system from a prior.
@@ -204,8 +204,8 @@ class Spec:
         for n in self.n:
             if n < low:
                 raise ValueError(
-                    f"N = {n} is too small for orders {self.orders}: the regression needs "
-                    f"at least {low} samples."
+                    f"N = {n} is too small for orders {self.orders}: a record needs at "
+                    f"least {low} samples ({Orders.SAMPLES_PER_PARAMETER} per parameter)."
                 )
         for snr in self.snr:
             if not snr > 0:
@@ -240,14 +240,9 @@ class Spec:
                 )
             if not isinstance(table, Mapping):
                 raise ValueError(f"Settings of estimator {name!r} must be a table.")
-            known, any_keyword = accepted_settings(name)
-            unknown = sorted(set(table) - known) if not any_keyword else []
-            if unknown:
-                raise ValueError(
-                    f"Unknown setting {unknown[0]!r} for estimator {name!r}; "
-                    f"known settings: {', '.join(sorted(known))}."
-                )
-            settings[name] = {key: _freeze(value) for key, value in sorted(table.items())}
+            frozen = {key: _freeze(value) for key, value in sorted(table.items())}
+            estimator(name, **frozen)  # unknown or ill-typed settings: one sentence
+            settings[name] = frozen
         set_(self, "settings", settings)
 
     # ---- derived ---------------------------------------------------------------------
@@ -366,13 +361,20 @@ class Spec:
     @classmethod
     def load(cls, path) -> Spec:
         """Read and validate a TOML spec file."""
-        path = pathlib.Path(path)
-        try:
-            with path.open("rb") as file:
-                data = tomllib.load(file)
-        except tomllib.TOMLDecodeError as error:
-            raise ValueError(f"Spec file '{path}' is not valid TOML: {error}.") from None
-        return cls.from_dict(data)
+        return cls.from_dict(read_toml(path))
+
+
+def read_toml(path) -> dict:
+    """The contents of a TOML spec file; a `ValueError` naming the file when it is
+    missing or not TOML."""
+    path = pathlib.Path(path)
+    if not path.is_file():
+        raise ValueError(f"Spec file '{path}' does not exist.")
+    try:
+        with path.open("rb") as file:
+            return tomllib.load(file)
+    except tomllib.TOMLDecodeError as error:
+        raise ValueError(f"Spec file '{path}' is not valid TOML: {error}.") from None
 
 
 def _table(value, name, allowed) -> dict:

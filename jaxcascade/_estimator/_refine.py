@@ -16,29 +16,11 @@ import jax.numpy as jnp
 import optimistix as optx
 from jaxtyping import Array, Float
 
-from ._model import CascadeParams, Orders, reflection_coefficients
-from ._simulate import signals
-from ._status import Status
+from .._model import CascadeParams, Orders, reflection_coefficients
+from .._simulate import signals
+from .._status import Status
 
 _REFLECTION_LIMIT = 0.999
-
-
-def _slices(orders: Orders):
-    o, start, out = orders, 0, {}
-    for name, size in (
-        ("MR", o.nR),
-        ("DR", o.nR - 1),
-        ("ML", o.nL),
-        ("DL", o.nL - 1),
-        ("a", o.r - 1),
-        ("b", o.p),
-        ("cL", 1),
-        ("mR", 1),
-        ("cR", 1),
-    ):
-        out[name] = slice(start, start + size)
-        start += size
-    return out
 
 
 def _step_up(k):
@@ -67,7 +49,7 @@ def _softplus_inverse(c):
 
 def from_unconstrained(z: Float[Array, " P"], orders: Orders, u_min, u_max) -> CascadeParams:
     """Map an unconstrained vector to admissible parameters (see module docstring)."""
-    s = _slices(orders)
+    s = orders.slices
     b = _step_up(_REFLECTION_LIMIT * jnp.tanh(z[s["b"]])) if orders.p else z[s["b"]]
     vector = jnp.concatenate(
         [

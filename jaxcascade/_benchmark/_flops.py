@@ -21,7 +21,7 @@ import time
 
 import numpy as np
 
-from ._model import Orders
+from .._model import Orders
 
 
 def flops_per_fit(orders: Orders | None = None, n: int = 4000, iterations: int = 20) -> dict:
@@ -45,7 +45,7 @@ def flops_per_fit(orders: Orders | None = None, n: int = 4000, iterations: int =
       columns); `gram` P(P + 1); `rhs` 2P; `solve` (P^3/3 + 5 P^2).
     """
     o = orders or Orders()
-    K, P, P1 = o.nR + o.nL, o.size, o.size - 3
+    K, P, P1 = o.nR + o.nL, o.size, o.static_dynamic.stop
     pwl = (5 * K - 1) * n
     linear = (2 * (o.r + o.p) - 1) * n
     switches = 13 * n

@@ -29,7 +29,8 @@ from collections.abc import Iterable, Iterator
 import numpy as np
 import pandas as pd
 
-from . import __version__
+from .._version import __version__
+from ._engine import run_chunk
 from ._spec import Cell, Spec
 
 _INSTALL = "install jaxcascade[distributed] (pip install 'jaxcascade[distributed]')"
@@ -46,7 +47,7 @@ def _distributed():
 
 
 def _fingerprint() -> str:
-    root = pathlib.Path(__file__).resolve().parent
+    root = pathlib.Path(__file__).resolve().parent.parent  # the package
     digest = hashlib.blake2b(digest_size=8)
     for path in sorted(root.rglob("*.py")):
         digest.update(path.relative_to(root).as_posix().encode() + b"\0" + path.read_bytes())
@@ -63,8 +64,6 @@ def chunk_task(
     """Run on a worker: one chunk in `dtype`; returns `(dtype, fingerprint, rows)`."""
     import jax
     import jax.numpy as jnp
-
-    from ._montecarlo import run_chunk
 
     jax.config.update("jax_enable_x64", dtype == "float64")
     frame = run_chunk(spec, cell, indices)

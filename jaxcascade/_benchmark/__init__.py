@@ -1,0 +1,2 @@
+"""Benchmarks of the batched workload: timing (`_timing`), the NumPy/SciPy baseline
+(`_baseline`) and the float64 FLOP floor (`_flops`)."""

@@ -1,0 +1,127 @@
+"""`jaxcascade bench`: the performance benchmark (`_benchmark`)."""
+
+from __future__ import annotations
+
+import csv
+import json
+import pathlib
+import time
+
+from .._benchmark._timing import run_benchmark, summary
+from .._examples import example as get_example
+from ._common import CLIError, examples, strict_json, writable_folder
+
+
+def _report(r: dict) -> str:
+    return "\n".join(
+        [
+            f"workload: Example {r['example']}, N = {r['n']}, SNR {r['snr']:g}, "
+            f"{r['iterations']} iterations, {r['realisations']} realisations ({r['dtype']})",
+            f"device: {r['device']}",
+            f"jaxcascade ({r['backend']} normal equations): {r['fits_per_s']:.1f} fits/s "
+            f"({r['run_s']:.3f} s per run; compile {r['compile_s']:.2f} s, kernel build "
+            f"{r['kernel_build_s']:.2f} s; statuses {r['status_counts']})",
+            f"numpy baseline: {r['baseline_fits_per_s']:.2f} fits/s "
+            f"({r['baseline_realisations']} realisations in {r['baseline_s']:.2f} s, "
+            f"{r['baseline_threads']} BLAS thread(s))",
+            f"ratio to baseline: {r['ratio']:.1f}",
+            f"floor: {r['flops_per_fit'] / 1e6:.2f} MFlop per fit at {r['matmul_gflops']:.1f} "
+            f"GFlop/s ({r['matmul_backend']} float64 matmul, {r['matmul_size']}^3) = "
+            f"{r['floor_fits_per_s']:.0f} fits/s; fraction reached {r['floor_fraction']:.3f}",
+            f"peak memory: {r['peak_mem_mb']:.0f} MB (peak RSS after the batched run)",
+        ]
+    )
+
+
+def _write_csv(record: dict, path: pathlib.Path) -> None:
+    row = {key: value for key, value in record.items() if key != "status_counts"}
+    row["status_counts"] = json.dumps(record["status_counts"])
+    row["jax_version"] = __import__("jax").__version__
+    row["date"] = time.strftime("%Y-%m-%dT%H:%M:%S")
+    with open(path, "w", newline="") as file:
+        writer = csv.DictWriter(file, fieldnames=list(row))
+        writer.writeheader()
+        writer.writerow(row)
+
+
+def run_bench(args) -> int:
+    ex = get_example(args.example)
+    checks = {
+        "--realisations": (args.realisations, 1),
+        "--n": (args.n, ex.orders.min_samples),
+        "--iterations": (args.iterations, 1),
+        "--baseline-realisations": (args.baseline_realisations, 1),
+        "--matmul-size": (args.matmul_size, 1),
+        "--repeats": (args.repeats, 1),
+        "--baseline-threads": (args.baseline_threads, 1),
+    }
+    for flag, (value, low) in checks.items():
+        if value < low:
+            raise CLIError(f"{flag} must be at least {low}, got {value}.")
+    out = pathlib.Path(args.out) if args.out else None
+    if out is not None:
+        writable_folder(out.parent, "--out")
+    record = run_benchmark(
+        args.realisations,
+        args.n,
+        args.iterations,
+        args.example,
+        args.baseline_realisations,
+        args.matmul_size,
+        args.repeats,
+        args.seed,
+        args.baseline_threads,
+        args.backend,
+    )
+    if out is not None:
+        _write_csv(record, out)
+    print(strict_json(summary(record)) if args.json else _report(record))
+    return 0
+
+
+def add_parser(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "bench",
+        help="benchmark the batched fit against NumPy/SciPy and the FLOP floor",
+        description=(
+            "Time the Monte-Carlo workload (simulation, noise, a fixed number of Vörös "
+            "iterations per realisation) with jaxcascade's batched path, a NumPy/SciPy "
+            "baseline and the float64 FLOP floor of this machine."
+        ),
+        epilog=examples(
+            "jaxcascade bench",
+            "jaxcascade bench --realisations 200 --n 2000 --json --out results/bench.csv",
+        ),
+    )
+    parser.add_argument("--realisations", type=int, default=1000, metavar="R")
+    parser.add_argument("--n", type=int, default=4000, metavar="N", help="samples per record")
+    parser.add_argument("--iterations", type=int, default=20, metavar="K")
+    parser.add_argument("--example", type=int, default=1, choices=(1, 2))
+    parser.add_argument(
+        "--baseline-realisations",
+        type=int,
+        default=20,
+        metavar="B",
+        help="realisations timed with the NumPy baseline (default 20)",
+    )
+    parser.add_argument(
+        "--baseline-threads",
+        type=int,
+        default=1,
+        help="BLAS threads of the baseline process (default 1: its problems are tiny)",
+    )
+    parser.add_argument(
+        "--matmul-size", type=int, default=2048, help="size of the float64 matmul for the floor"
+    )
+    parser.add_argument("--repeats", type=int, default=3, help="timed runs; the best counts")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument(
+        "--backend",
+        default="auto",
+        choices=("auto", "xla", "fused"),
+        help="how the normal equations are formed (default auto: the fused CPU kernel "
+        "where it applies)",
+    )
+    parser.add_argument("--json", action="store_true", help="print the summary as JSON")
+    parser.add_argument("--out", default=None, help="also write every figure to this CSV file")
+    parser.set_defaults(func=run_bench)

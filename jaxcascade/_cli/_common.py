@@ -1,0 +1,131 @@
+"""What the commands share: the one-line error, options that read a record, parsers of
+option values, and the check that an output folder can be written."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import pathlib
+import tempfile
+
+
+class CLIError(Exception):
+    """A problem with the user's request; reported as one line, exit code 2."""
+
+
+class _Formatter(argparse.HelpFormatter):
+    # Text laid out by hand (the examples that end each --help) is kept as written;
+    # one-paragraph descriptions are wrapped as usual.
+    def _fill_text(self, text, width, indent):
+        if "\n" in text:
+            return "".join(indent + line for line in text.splitlines(keepends=True))
+        return super()._fill_text(text, width, indent)
+
+
+class Parser(argparse.ArgumentParser):
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("formatter_class", _Formatter)
+        super().__init__(*args, **kwargs)
+
+    def error(self, message):  # argparse's default prints the usage too: keep it to one line
+        raise CLIError(f"{message} (see '{self.prog} --help')")
+
+
+def add_record_arguments(parser, *, scaling: str) -> None:
+    """Options shared by the commands that read a measured record (`fit`, `loop`)."""
+    parser.add_argument("--input", required=True, help="input column")
+    parser.add_argument("--output", required=True, help="output column")
+    parser.add_argument("--time", default=None, help="optional time column")
+    parser.add_argument(
+        "--orders",
+        default="2,2,2,2",
+        help="declared nR,nL,r,p (default 2,2,2,2; at most 8,8,16,16, and the record needs "
+        "10 samples per parameter)",
+    )
+    parser.add_argument("--decimate", type=int, default=1, help="anti-aliased decimation factor")
+    parser.add_argument(
+        "--scaling",
+        default=scaling,
+        choices=("none", "scale", "standard"),
+        help=f"units the model is fitted in; estimates are also mapped back (default {scaling})",
+    )
+
+
+def parse_orders(text: str):
+    """`--orders nR,nL,r,p` as `Orders`, or a CLIError naming the option."""
+    from .._model import Orders
+
+    try:
+        return Orders.parse(text)
+    except ValueError as error:
+        raise CLIError(f"--orders: {error}") from None
+
+
+def number_list(kind, option: str):
+    """An argparse type: comma-separated numbers of `kind`, at least one."""
+
+    def parse(text: str):
+        try:
+            values = [kind(part) for part in text.split(",") if part.strip()]
+        except ValueError:
+            raise CLIError(f"{option} takes comma-separated numbers, got {text!r}.") from None
+        if not values:
+            raise CLIError(f"{option} needs at least one value.")
+        return values
+
+    return parse
+
+
+def name_list(text: str) -> list[str]:
+    """Comma-separated names."""
+    return [part.strip() for part in text.split(",") if part.strip()]
+
+
+def estimator_help() -> str:
+    """One line per registered estimator, for `--estimator` help texts."""
+    from .._estimator import ESTIMATORS
+
+    return "; ".join(f"{name}: {cls.summary}" for name, cls in ESTIMATORS.items())
+
+
+def examples(*lines: str) -> str:
+    """An `epilog` of example command lines, to end a command's --help."""
+    return "examples:\n" + "\n".join(f"  {line}" for line in lines)
+
+
+def writable_folder(path, option: str = "--out") -> None:
+    """Create `path` if needed and check it can be written, before any work starts; the
+    error names `option`, the option that chose the folder."""
+    folder = pathlib.Path(path)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=folder):
+            pass
+    except OSError as error:
+        raise CLIError(
+            f"cannot write to folder '{folder}' ({error.strerror or error}); "
+            f"choose another with {option}."
+        ) from None
+    if not os.access(folder, os.W_OK):
+        raise CLIError(f"cannot write to folder '{folder}'; choose another with {option}.")
+
+
+def strict_json(value, **options) -> str:
+    """`value` as strict JSON: NaN and infinities become `null` (JSON has no such
+    numbers; the record's status or message says why), NumPy scalars and arrays plain
+    numbers and lists."""
+    return json.dumps(_finite_or_null(value), allow_nan=False, **options)
+
+
+def _finite_or_null(value):
+    if isinstance(value, dict):
+        return {key: _finite_or_null(item) for key, item in value.items()}
+    if isinstance(value, list | tuple):
+        return [_finite_or_null(item) for item in value]
+    if hasattr(value, "tolist") and not isinstance(value, str):  # NumPy scalars, arrays
+        return _finite_or_null(value.tolist())
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value

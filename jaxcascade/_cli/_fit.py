@@ -1,0 +1,126 @@
+"""`jaxcascade fit`: fit the cascade to one measured or simulated record.
+
+Exit codes: 0 when the fit's status is usable (`converged`, `cycled`), `FAILED` (3) when
+it is a failure (`Status.failure`; the result is printed all the same), 2 for a bad
+request (one line on stderr, nothing fitted).
+"""
+
+from __future__ import annotations
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._data import read_record
+from .._efficiency import standard_errors
+from .._estimator import ESTIMATORS, estimator
+from .._metrics import fit_percent, score
+from .._model import CascadeParams, Orders
+from .._simulate import simulate
+from .._status import Status
+from .._validate import record as checked
+from ._common import (
+    CLIError,
+    add_record_arguments,
+    estimator_help,
+    examples,
+    parse_orders,
+    strict_json,
+)
+
+FAILED = 3  # exit code of a fit whose status is a failure
+
+
+def fit_record(u, y, orders: Orders, name: str = "robust", **settings):
+    """Fit one record with the registered estimator `name`.
+
+    Returns `(solution, error, errors)`: `error` is the NRMSE of the free-run simulation
+    of the estimate on the same record (inf when the estimate is inadmissible), `errors`
+    the estimated standard error of every parameter (`_efficiency.standard_errors`: the
+    output-error information at the estimate, sigma from the residual, white noise).
+    """
+    u, y = checked(u, y, orders=orders, where="fit")
+    solution = jax.device_get(estimator(name, **settings)(u, y, orders))
+    vector = jnp.asarray(solution.params.to_vector(), u.dtype)
+
+    def simulate_vector(vector):
+        return simulate(CascadeParams.from_vector(vector, orders, check=False), u)
+
+    y_sim = np.asarray(simulate_vector(vector))
+    errors, _ = standard_errors(simulate_vector, vector, y)
+    errors = dict(zip(orders.names, np.asarray(errors, float).tolist(), strict=True))
+    return solution, score(np.asarray(y), y_sim), errors
+
+
+def run_fit(args) -> int:
+    orders = parse_orders(args.orders)
+    if args.decimate < 1:
+        raise CLIError(f"--decimate must be an integer >= 1, got {args.decimate}.")
+    estimator(args.estimator)  # unknown names fail here, before reading data
+    record = read_record(
+        args.data,
+        args.input,
+        args.output,
+        time_column=args.time,
+        decimate=args.decimate,
+        scaling=args.scaling,
+        orders=orders,
+    )
+    solution, error, errors = fit_record(record.u, record.y, orders, args.estimator)
+    status = Status(int(solution.status))
+    estimates = solution.params.to_dict()
+    result = {
+        "estimator": args.estimator,
+        "status": status.name,
+        "message": status.message,
+        "estimates": estimates,
+        "std_errors": errors,
+        "nrmse": error,  # inf (null in JSON) when the estimate's simulation blows up
+        "iterations": int(solution.iterations),
+    }
+    if args.scaling != "none":
+        # the standard errors are in model units, beside `estimates`
+        result["estimates_physical"] = record.scaling.params_to_physical(estimates)
+        result["scaling"] = record.scaling.to_dict()
+    code = FAILED if status.failure else 0
+    if args.json:
+        print(strict_json(result))
+        return code
+    print(f"{args.estimator} estimator: {status.name} after {result['iterations']} iterations")
+    if status.failure:
+        print(f"failed: {status.message}")
+    shown = f"{error:.4g} (fit {fit_percent(error):.1f} %)" if math.isfinite(error) else "inf"
+    print(f"free-run NRMSE {shown} on {len(record)} samples")
+    for name, value in estimates.items():
+        print(f"  {name:>4} = {value: .6f} ± {errors[name]:.2g}")
+    return code
+
+
+def add_parser(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "fit",
+        help="fit the cascade to a CSV or Parquet record",
+        description=(
+            "Fit the cascade to one record and print the estimates, the status and the "
+            "free-run NRMSE. Exit code 0 when the status is usable (converged, cycled), "
+            f"{FAILED} when it is a failure (the result is printed all the same), 2 for a "
+            "bad request."
+        ),
+        epilog=examples(
+            "jaxcascade fit record.csv --input u --output y",
+            "jaxcascade fit record.parquet --input u --output y --orders 3,2,2,1 "
+            "--estimator literal --json",
+        ),
+    )
+    parser.add_argument("data", help="CSV or Parquet file")
+    add_record_arguments(parser, scaling="none")
+    parser.add_argument(
+        "--estimator",
+        default="robust",
+        choices=tuple(ESTIMATORS),
+        help=f"default robust; {estimator_help()}",
+    )
+    parser.add_argument("--json", action="store_true", help="print a JSON result")
+    parser.set_defaults(func=run_fit)

@@ -1,0 +1,198 @@
+"""`jaxcascade sweep`: a Monte-Carlo sweep from a TOML spec or from options."""
+
+from __future__ import annotations
+
+import pathlib
+import sys
+
+import pandas as pd
+
+from .._montecarlo._run import run, summary_path
+from .._montecarlo._spec import FAMILIES, Spec, read_toml
+from .._montecarlo._tables import CELL_COLUMNS, compare, read_summary, summarise
+from .._plot._sweep import plot_sweep
+from ._common import (
+    CLIError,
+    estimator_help,
+    examples,
+    name_list,
+    number_list,
+    parse_orders,
+    writable_folder,
+)
+
+
+def spec_from_args(args) -> Spec:
+    """The spec of a `sweep` command line: a TOML file, overridden by the options given."""
+    data = {}
+    if args.spec is not None:
+        data = read_toml(args.spec)
+    elif args.example is None and args.system is None:
+        raise CLIError("give a spec file, --example or --system (see 'jaxcascade sweep --help').")
+    if args.example is not None and args.system is not None:
+        raise CLIError("give either --example or --system, not both.")
+    if args.example is not None:
+        data.pop("system", None)
+        data["example"] = args.example
+    if args.system is not None:
+        data.pop("example", None)
+        data["system"] = {"family": args.system}
+    if args.orders is not None:
+        if "example" in data:
+            raise CLIError("--orders needs a family or explicit system; an example has its own.")
+        system = data.get("system", {})
+        system = {"family": system} if isinstance(system, str) else dict(system)
+        data["system"] = {**system, "orders": str(parse_orders(args.orders))}
+    for field, value in (
+        ("n", args.n),
+        ("snr", args.snr),
+        ("realisations", args.realisations),
+        ("seed", args.seed),
+        ("estimators", args.estimator),
+        ("chunk_size", args.chunk_size),
+        ("scheduler", args.scheduler),
+    ):
+        if value is not None:
+            data[field] = value
+    if args.amplitude is not None:
+        data.setdefault("input", {})
+        data["input"] = {**data["input"], "amplitude": args.amplitude}
+    return Spec.from_dict(data)
+
+
+def check_baseline(spec: Spec, baseline: pd.DataFrame, path) -> None:
+    """Refuse, before the sweep runs, a `--compare` baseline that shares no grid cell
+    (system, N, SNR, estimator) and parameter with the sweep `spec` will run."""
+    planned = {(spec.system, int(c.n), float(c.snr), c.estimator) for c in spec.cells()}
+    stored = set(
+        zip(
+            baseline["system"].astype(str),
+            baseline["n"].astype("int64"),
+            baseline["snr"].astype("float64"),
+            baseline["estimator"].astype(str),
+            strict=True,
+        )
+    )
+    shared = planned & stored
+    names = set(baseline["parameter"].astype(str)) & set(spec.orders.names)
+    if shared and names:
+        return
+
+    def listed(cells):
+        cells = sorted(cells)
+        shown = ", ".join(
+            f"{system} N={n} SNR={snr:g} {name}" for system, n, snr, name in cells[:3]
+        )
+        return shown + (f" and {len(cells) - 3} more" if len(cells) > 3 else "")
+
+    what = (
+        f"no grid cell: it holds {listed(stored)}, the sweep runs {listed(planned)}"
+        if not shared
+        else f"no parameter: it holds {', '.join(sorted(set(baseline['parameter'].astype(str))))}"
+    )
+    raise CLIError(f"--compare: baseline '{path}' shares {what}; compare with a matching summary.")
+
+
+def _print_cells(summary: pd.DataFrame) -> None:
+    cells = summary.drop_duplicates(CELL_COLUMNS)
+    columns = [*CELL_COLUMNS, "count", "used", "converged_rate", "recovered_rate", "nrmse_median"]
+    print(cells[columns].to_string(index=False, float_format=lambda v: f"{v:.4g}"))
+
+
+def sweep(args) -> int:
+    spec = spec_from_args(args)
+    if args.out is None:
+        if args.spec is None:
+            raise CLIError("--out is required without a spec file (e.g. results/NAME.parquet).")
+        args.out = str(pathlib.Path("results") / (pathlib.Path(args.spec).stem + ".parquet"))
+    out = pathlib.Path(args.out)
+    if out.suffix != ".parquet":
+        raise CLIError(f"--out must name a .parquet file, got '{out}'.")
+    baseline = None
+    if args.compare:
+        try:
+            baseline = read_summary(args.compare)
+        except ValueError as error:
+            raise CLIError(f"--compare: {error}") from None
+        check_baseline(spec, baseline, args.compare)
+    writable_folder(out.parent)
+    if args.plots:
+        writable_folder(args.plots, "--plots")
+
+    table = run(spec, out, resume=args.resume, progress=None, command=["jaxcascade", *sys.argv[1:]])
+    summary = summarise(table)
+    summary.to_csv(summary_path(out), index=False)
+    _print_cells(summary)
+    print(f"written: {out}, {summary_path(out)}")
+    if args.plots:
+        paths = plot_sweep(summary, table, args.plots, out.name.removesuffix(".parquet"))
+        print(f"plots: {', '.join(str(p) for p in paths)}")
+    if baseline is not None:
+        result = compare(summary, baseline, args.threshold)
+        flagged = result[result["flagged"]]
+        checked = len(result)
+        if flagged.empty:
+            print(f"compare: no bias or std moved beyond Monte-Carlo error ({checked} checked).")
+            return 0
+        print(f"compare: {len(flagged)} of {checked} statistics moved beyond Monte-Carlo error:")
+        columns = [*CELL_COLUMNS, "parameter", "statistic", "value", "baseline", "diff", "se", "z"]
+        print(flagged[columns].to_string(index=False, float_format=lambda v: f"{v:.4g}"))
+        return 1
+    return 0
+
+
+def add_parser(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "sweep",
+        help="Monte-Carlo sweep over SNR x N x estimator with bias/std/convergence tables",
+        description=(
+            "Run a Monte-Carlo sweep from a TOML spec or from options (options override "
+            "the spec file). Writes OUT (one row per realisation, Parquet) and "
+            "OUT.summary.csv; a killed run continues when started again."
+        ),
+        epilog=examples(
+            "jaxcascade sweep --example 1 --snr 10,25,50 --n 1000,4000 --realisations 100 "
+            "--out results/ex1.parquet",
+            "jaxcascade sweep spec.toml --out results/b.parquet --compare results/a.summary.csv",
+        ),
+    )
+    parser.add_argument("spec", nargs="?", help="TOML spec file (see jaxcascade.Spec)")
+    parser.add_argument("--example", type=int, help="paper example, 1 or 2")
+    parser.add_argument(
+        "--system",
+        choices=FAMILIES,
+        help="a family of systems: 'random' draws each realisation's system from the "
+        "documented prior (default N 3000, SNR 30)",
+    )
+    parser.add_argument(
+        "--orders", help="nR,nL,r,p of a family (default 2,2,2,2; at most 8,8,16,16)"
+    )
+    parser.add_argument(
+        "--snr", type=number_list(float, "--snr"), help="e.g. 10,25,50 (inf = noise-free)"
+    )
+    parser.add_argument(
+        "--n", type=number_list(int, "--n"), help="sample sizes, e.g. 500,1000,4000"
+    )
+    parser.add_argument("--realisations", type=int, help="records per grid cell")
+    parser.add_argument("--seed", type=int, help="sweep seed (default 0)")
+    parser.add_argument(
+        "--estimator", type=name_list, help=f"e.g. literal or literal,robust ({estimator_help()})"
+    )
+    parser.add_argument("--amplitude", type=float, help="input uniform in (-A, A) (default 2)")
+    parser.add_argument("--chunk-size", type=int, help="realisations per compiled batch")
+    parser.add_argument(
+        "--scheduler",
+        metavar="tcp://HOST:PORT",
+        help="run the chunks on this Dask scheduler's workers (pip install "
+        "'jaxcascade[distributed]'); the default runs them in this process",
+    )
+    parser.add_argument("--out", help="results/NAME.parquet (default results/SPEC.parquet)")
+    parser.add_argument(
+        "--resume", action="store_true", help="reuse a finished OUT (a killed run continues anyway)"
+    )
+    parser.add_argument("--compare", metavar="BASELINE", help="baseline summary to compare with")
+    parser.add_argument(
+        "--threshold", type=float, default=3.0, help="flag |diff| > T * combined MC error (3)"
+    )
+    parser.add_argument("--plots", metavar="DIR", help="write bias/RMSE/rate plots to DIR")
+    parser.set_defaults(func=sweep)

@@ -1,0 +1,119 @@
+"""The output-error Cramér-Rao bound: how precisely a record can determine the cascade.
+
+For the output-error model `y(t) = simulate(theta, u)(t) + e(t)` with `e` white Gaussian
+of standard deviation `sigma`, the Fisher information of theta (the parameter vector in
+`Orders.names` order, with `cR`, not `C`) is
+
+    F = J^T J / sigma^2,    J(t, i) = d simulate(theta, u)(t) / d theta_i,
+
+and no unbiased estimator has a variance below `diag(F^-1)` (the bound). `J` is exact
+forward-mode differentiation (`jax.jacfwd`) through the simulator's `lax.scan`s: the
+backlash and the piecewise-linear block are piecewise smooth, so the derivative exists
+except where a sample sits exactly on a switching threshold (a set of measure zero).
+
+**A sweep cell** has many input records. Its bound is the average of the per-record
+bounds, `crlb_std = sqrt(mean_k diag(F_k^-1))`, not the bound of the average information
+`sqrt(diag((mean_k F_k)^-1))`: the Monte-Carlo variance of an estimator over records is
+`E[Var(theta_hat | u)] + Var(E[theta_hat | u]) >= E[diag(F_u^-1)]`, so the average of the
+per-record bounds is the tighter of the two valid bounds (by Jensen's inequality for the
+matrix inverse, `E[F^-1] >= (E F)^-1`); for long records they agree (`F_k / N`
+concentrates). `fisher_information` accepts a batch of records for the other one.
+
+**Measured records** (`standard_errors`): the same information at the estimate, with
+`sigma^2` estimated from the residual (`sum r^2 / (N - P)`), and, when a noise model
+whitens the residual, the whitened Jacobian (generalised least squares): the estimated
+standard errors of the estimate, as MATLAB's `getcov` reports them.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Float
+
+from . import _linalg
+from ._model import CascadeParams
+from ._simulate import simulate
+
+
+def jacobian(params: CascadeParams, u: Float[Array, " T"]) -> Float[Array, "T P"]:
+    """`d simulate(params, u) / d theta` (theta in `Orders.names` order), by forward-mode
+    differentiation through the simulator (all P tangents in one pass)."""
+    orders = params.orders
+    vector = params.to_vector().astype(u.dtype)
+    return jax.jacfwd(lambda v: simulate(CascadeParams.from_vector(v, orders, check=False), u))(
+        vector
+    )
+
+
+def _sigma(params, u, snr, sigma):
+    if (snr is None) == (sigma is None):
+        raise ValueError("Give the noise level as exactly one of snr or sigma.")
+    if sigma is not None:
+        return jnp.asarray(sigma, u.dtype)
+    # the paper's SNR is an amplitude ratio to the noise-free output (as `add_noise`)
+    return jnp.std(simulate(params, u)) / jnp.asarray(snr, u.dtype)
+
+
+def fisher_information(
+    params: CascadeParams, u: Float[Array, "... T"], *, snr=None, sigma=None
+) -> Float[Array, "P P"]:
+    """Fisher information `J^T J / sigma^2` of theta for the record(s) `u`; a batch of
+    records (leading axis) gives their average information. The noise level is
+    `sigma`, or `std(simulate(params, u)) / snr` (the paper's amplitude SNR)."""
+    if u.ndim == 2:
+        return jnp.mean(
+            jax.vmap(lambda one: fisher_information(params, one, snr=snr, sigma=sigma))(u), 0
+        )
+    J = jacobian(params, u)
+    return J.T @ J / _sigma(params, u, snr, sigma) ** 2
+
+
+def crlb(params: CascadeParams, u: Float[Array, "... T"], *, snr=None, sigma=None):
+    """The Cramér-Rao bound on the standard deviation of every parameter (`Orders.names`
+    order) for record `u`; with a batch of records, the average of the per-record bounds
+    (module docstring). `inf` for a parameter the record does not determine (singular
+    information, e.g. a segment never visited), 0 noise-free. Traceable."""
+    if u.ndim == 2:
+        variances = jax.vmap(lambda one: crlb(params, one, snr=snr, sigma=sigma) ** 2)(u)
+        return jnp.sqrt(jnp.mean(variances, 0))
+    J = jacobian(params, u)
+    return _bound(J, _sigma(params, u, snr, sigma))
+
+
+def _bound(J, sigma):
+    """`sigma sqrt(diag((J^T J)^-1))` by a Jacobi-scaled Cholesky factorisation; `inf`
+    for a parameter the record does not determine (a zero column, or one whose scaled
+    variance exceeds 1e10: it loads on a direction of the information with eigenvalue
+    below ~1e-10 of the largest; a ridge of 1e-12 keeps the factorisation finite)."""
+    scale = jnp.sqrt(jnp.sum(J**2, axis=0))
+    zero = scale <= jnp.finfo(J.dtype).tiny
+    scaled = J / jnp.where(zero, 1.0, scale)
+    identity = jnp.eye(J.shape[1], dtype=J.dtype)
+    gram = scaled.T @ scaled + jnp.diag(zero.astype(J.dtype)) + 1e-12 * identity
+    factor, _ = _linalg.cholesky(gram)
+    scaled_variance = _linalg.inverse_diagonal(factor)
+    undetermined = zero | ~jnp.isfinite(scaled_variance) | (scaled_variance > 1e10)
+    bound = sigma * jnp.sqrt(scaled_variance) / jnp.where(zero, 1.0, scale)
+    return jnp.where(undetermined, jnp.inf, bound)
+
+
+def standard_errors(
+    simulate_theta, theta: Float[Array, " P"], y: Float[Array, " T"], whiten=None
+) -> tuple[Float[Array, " P"], Float[Array, ""]]:
+    """Estimated standard errors of an output-error estimate `theta` of record `y`.
+
+    - `simulate_theta`: `theta -> simulated output` (any model: the cascade, or a cascade
+      with effects);
+    - `whiten`: the noise model's inverse filter (`ARNoise.innovations`), applied to the
+      residual and to every column of the Jacobian; default white noise.
+
+    **Returns:** `(standard_errors, sigma)` with `sigma^2 = sum(w^2) / (N - P)` from the
+    (whitened) residual `w`.
+    """
+    whiten = whiten or (lambda signal: signal)
+    residual = whiten(y - simulate_theta(theta))
+    J = jax.vmap(whiten, in_axes=1, out_axes=1)(jax.jacfwd(simulate_theta)(theta))
+    n, p = J.shape
+    sigma = jnp.sqrt(jnp.sum(residual**2) / max(n - p, 1))
+    return _bound(J, sigma), sigma

@@ -1,0 +1,167 @@
+"""Running a sweep: every cell's realisations, chunk by chunk, written as they finish and
+resumable after a crash.
+
+With an output path every chunk is written to `OUT.partial/` as it finishes (atomically,
+under a name fixed by the chunk) and merged into `OUT` with its provenance at the end; a
+killed run continues from the chunks on disk. With `Spec.scheduler` the chunks run on a
+Dask cluster (`_distributed`, imported only then).
+"""
+
+from __future__ import annotations
+
+import json
+import pathlib
+import shutil
+
+import jax.numpy as jnp
+import numpy as np
+import pandas as pd
+
+from ._engine import run_chunk
+from ._spec import Spec
+from ._tables import read_metadata, run_metadata, write_table
+
+
+def _partial_folder(out: pathlib.Path) -> pathlib.Path:
+    return out.with_name(out.name + ".partial")
+
+
+def _identity(spec: Spec, dtype) -> dict:
+    # What must match for a resumed run to continue the same experiment. The chunk size
+    # may differ: it never changes a result.
+    return {"spec": spec.to_dict(chunk_size=False), "dtype": str(np.dtype(dtype))}
+
+
+def _check_same(stored: dict, expected: dict, where) -> None:
+    if json.loads(json.dumps(stored)) != json.loads(json.dumps(expected)):
+        raise ValueError(
+            f"'{where}' was written by a different spec or dtype; use another --out "
+            "or delete it to start afresh."
+        )
+
+
+def _done(folder: pathlib.Path) -> pd.DataFrame | None:
+    files = sorted(folder.glob("chunk-*.parquet"))
+    if not files:
+        return None
+    return pd.concat([pd.read_parquet(f) for f in files], ignore_index=True)
+
+
+def _ordered(spec: Spec, table: pd.DataFrame) -> pd.DataFrame:
+    order = {(c.n, c.snr, c.estimator): i for i, c in enumerate(spec.cells())}
+    rank = [order[k] for k in zip(table["n"], table["snr"], table["estimator"], strict=True)]
+    table = table.assign(_cell=rank).drop_duplicates(["_cell", "realisation"])
+    table = table.sort_values(["_cell", "realisation"], kind="stable").drop(columns="_cell")
+    return table.reset_index(drop=True)
+
+
+def _chunks(spec: Spec, done: pd.DataFrame | None):
+    """(cell, indices) for every realisation not yet in `done`, in table order."""
+    for cell in spec.cells():
+        have = set()
+        if done is not None:
+            mask = (
+                (done["n"] == cell.n)
+                & (done["snr"] == cell.snr)
+                & (done["estimator"] == cell.estimator)
+            )
+            have = set(done.loc[mask, "realisation"].tolist())
+        missing = [i for i in range(spec.realisations) if i not in have]
+        for start in range(0, len(missing), spec.chunk_size):
+            yield cell, missing[start : start + spec.chunk_size]
+
+
+def run(
+    spec: Spec, out=None, *, resume: bool = False, progress: bool | None = None, command=None
+) -> pd.DataFrame:
+    """Run every cell of `spec`; returns the realisation table (rows in `spec.cells()` order).
+
+    With `out` (a `.parquet` path) every chunk is written to `OUT.partial/` as it
+    finishes, and merged into `out` (with metadata) at the end. If `OUT.partial/` exists
+    the run continues it (its spec and dtype must match); an existing complete `out` is
+    an error unless `resume`, which reuses it. `progress=None` shows a bar on a terminal.
+
+    With `spec.scheduler` the chunks run on that Dask cluster (`_distributed`), arriving
+    in any order; the table is the same as in this process.
+    """
+    from tqdm.auto import tqdm
+
+    dtype = jnp.result_type(float)
+    total = spec.realisations * len(spec.cells())
+    if out is None:
+        chunks = list(_chunks(spec, None))
+        with tqdm(total=total, unit="realisation", disable=_disable(progress)) as bar:
+            frames = []
+            for _, indices, frame in _results(spec, chunks, dtype):
+                frames.append(frame)
+                bar.update(len(indices))
+        return _ordered(spec, pd.concat(frames, ignore_index=True))
+
+    out = pathlib.Path(out)
+    folder = _partial_folder(out)
+    identity = _identity(spec, dtype)
+    stamp = folder / "spec.json"
+    if folder.exists() and stamp.exists():
+        _check_same(json.loads(stamp.read_text()), identity, folder)
+    elif out.exists():
+        if not resume:
+            raise ValueError(f"'{out}' already exists; pass --resume to reuse it or delete it.")
+        meta = read_metadata(out)
+        _check_same(
+            {"spec": _without_chunk(meta.get("spec")), "dtype": meta.get("dtype")}, identity, out
+        )
+        return pd.read_parquet(out)
+    else:
+        folder.mkdir(parents=True, exist_ok=True)
+        temporary = stamp.with_suffix(".tmp")
+        temporary.write_text(json.dumps(identity, sort_keys=True))
+        temporary.replace(stamp)
+
+    done = _done(folder)
+    initial = 0 if done is None else len(done)
+    with tqdm(total=total, initial=initial, unit="realisation", disable=_disable(progress)) as bar:
+        for cell, indices, frame in _results(spec, list(_chunks(spec, done)), dtype):
+            # repr(snr) is exact, so two SNRs never share a file name.
+            name = f"chunk-n{cell.n}-snr{cell.snr!r}-{cell.estimator}-{indices[0]:09d}.parquet"
+            backend = frame.attrs.get("normal_equations")
+            write_table(frame, folder / name, {"normal_equations": backend})
+            bar.update(len(indices))
+
+    table = _ordered(spec, _done(folder))
+    if len(table) != total:  # never write a table with realisations missing
+        raise RuntimeError(f"'{folder}' holds {len(table)} of {total} realisations.")
+    write_table(table, out, run_metadata(spec, dtype, _backends(folder), command))
+    shutil.rmtree(folder)
+    return pd.read_parquet(out)
+
+
+def _backends(folder: pathlib.Path) -> str:
+    """How the chunks in `folder` formed their normal equations (`fused`, `xla`, or both
+    joined by `+` when a resumed run changed machines)."""
+    found = {read_metadata(path).get("normal_equations") for path in folder.glob("chunk-*")}
+    return "+".join(sorted(str(b) for b in found if b)) or "unknown"
+
+
+def _results(spec: Spec, chunks: list, dtype):
+    """`(cell, indices, frame)` for every chunk, in this process or on the Dask cluster."""
+    if spec.scheduler is None:
+        return ((cell, indices, run_chunk(spec, cell, indices)) for cell, indices in chunks)
+    from ._distributed import distributed_chunks  # imports dask only when asked for
+
+    return distributed_chunks(spec, chunks, dtype)
+
+
+def _without_chunk(spec_dict):
+    if not isinstance(spec_dict, dict):
+        return spec_dict
+    return {k: v for k, v in spec_dict.items() if k not in ("chunk_size", "scheduler")}
+
+
+def _disable(progress):
+    return None if progress is None else not progress
+
+
+def summary_path(out) -> pathlib.Path:
+    """`NAME.parquet` -> `NAME.summary.csv`."""
+    out = pathlib.Path(out)
+    return out.with_name(out.name.removesuffix(".parquet") + ".summary.csv")
