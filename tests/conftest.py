@@ -1,5 +1,18 @@
-"""Tests compute in float64: the oracle comparisons need it (the package never sets it)."""
+"""Tests compute in float64: the oracle comparisons need it (the package never sets it).
 
-import jax
+The CLI turns on JAX's persistent compilation cache (`~/.cache/jaxcascade/xla`) when it
+runs; the tests call the CLI in-process, so the cache would stay on for every later test
+and read back executables compiled by earlier ones. Deserialising those (executables
+with the fused kernel's FFI call among them) crashed the interpreter in
+`compilation_cache.get_executable_and_time` late in a full run, once on CI and once here,
+not in any subset we could isolate. The tests therefore run with the cache off, and
+leave the user's cache alone.
+"""
+
+import os
+
+os.environ["JAXCASCADE_CACHE"] = "off"
+
+import jax  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)

@@ -60,12 +60,20 @@ def test_table_independent_of_chunk_size_and_order():
     spec7 = small_spec(snr=[25.0, 50.0], chunk_size=7)
     a = without_timing(run(spec3, progress=False))
     b = without_timing(run(spec7, progress=False))
-    pd.testing.assert_frame_equal(a, b, check_exact=True)
+    # The estimates are bit-identical; the Cramer-Rao bound is a batched matrix product,
+    # whose summation order XLA picks by batch shape: equal to rounding.
+    bound = [c for c in a.columns if c.startswith("crlb_")]
+    assert bound
+    pd.testing.assert_frame_equal(a.drop(columns=bound), b.drop(columns=bound), check_exact=True)
+    pd.testing.assert_frame_equal(a[bound], b[bound], check_exact=False, rtol=1e-12, atol=0)
     # Realisation 5 alone, in another batch position, gives the same row.
     cell = spec3.cells()[1]
     alone = without_timing(run_chunk(spec3, cell, [5]))
     row = a[(a["snr"] == cell.snr) & (a["realisation"] == 5)].reset_index(drop=True)
-    pd.testing.assert_frame_equal(alone, row, check_exact=True)
+    pd.testing.assert_frame_equal(
+        alone.drop(columns=bound), row.drop(columns=bound), check_exact=True
+    )
+    pd.testing.assert_frame_equal(alone[bound], row[bound], check_exact=False, rtol=1e-12, atol=0)
     # Different cells and realisations get different records.
     assert a["key"].nunique() == len(a)
     assert set(a.columns) >= {"status", "iterations", "cost", "nrmse", "MR1", "true_MR1"}
@@ -312,5 +320,9 @@ def test_plots_are_written(tmp_path):
     from jaxcascade._plot._sweep import plot_sweep
 
     paths = plot_sweep(summarise(table), table, tmp_path, "demo")
-    assert len(paths) == 6
+    names = sorted(pathlib.Path(p).name for p in paths)
+    kinds = ["bias", "rmse", "std"]
+    want = [f"demo_{k}_vs_{x}.png" for k in kinds for x in ("n", "snr")]
+    want += ["demo_convergence_rate.png", "demo_distributions.png", "demo_efficiency.png"]
+    assert names == sorted(want)
     assert all(pathlib.Path(p).stat().st_size > 10_000 for p in paths)
