@@ -10,12 +10,15 @@ Model and simulation
 Estimators (each fits one record and returns a `Solution` with a `Status`)
     `Literal` / `voros` (the paper's iteration, eqs. 19-28), `Robust` / `robust`
     (multi-start output-error least squares), `refine`; the registry `ESTIMATORS` and
-    `estimator(name, **settings)`; `Estimator`, the interface; `initial_guess`,
+    `estimator` (`estimator(name, **settings)`); `Estimator`, the interface; `initial_guess`,
     `regression` (the key-term regression, eqs. 15-18); `status_names` (codes to names).
     Records are checked before any work: one 1-D record of real, finite numbers (lists
     and NumPy arrays are converted), `u` and `y` of equal length, at least
     `Orders.min_samples` samples; anything else is a `ValueError` or `TypeError` saying
     what to change.
+Efficiency
+    `jacobian` (of the simulated output), `fisher_information`, `crlb` (the Cramer-Rao
+    bound on each parameter's standard deviation), `standard_errors` (of a fit).
 Monte-Carlo sweeps
     `Spec`, `Cell`, `run`, `run_chunk`, `run_realisation`, `cell_key`, `chunk_memory`;
     `summarise`, `compare`, `read_summary`, `read_metadata`; `plot_sweep`.
@@ -42,6 +45,12 @@ from ._diagnose import (
     ResidualTests as ResidualTests,
     regime_from_switches as regime_from_switches,
     residual_tests as residual_tests,
+)
+from ._efficiency import (
+    crlb as crlb,
+    fisher_information as fisher_information,
+    jacobian as jacobian,
+    standard_errors as standard_errors,
 )
 from ._effects import (
     EFFECTS as EFFECTS,
