@@ -26,6 +26,7 @@ robust() {  # issue 4: literal vs robust, 100 realisations per cell (robust ~2 s
         results/robust_vs_literal_seed1/random.parquet --out results/random_family_misses.csv
 }
 sweeps() {  # issue 3: SNR x N sweeps of both paper examples, 500 realisations per cell
+    rm -rf results/sweep_example{1,2}{,_paper}.parquet{,.partial} results/sweep_example{1,2}
     for ex in 1 2; do
         jaxcascade sweep --example $ex --snr 10,25,50 --n 500,1000,4000 --realisations 500 \
             --seed 0 --out results/sweep_example$ex.parquet --plots results/sweep_example$ex
