@@ -17,7 +17,8 @@ distributed() {  # issue 7: in-process vs 1 and 2 local Dask workers
         --out results/distributed_throughput.csv
 }
 robust() {  # issue 4: literal vs robust, 100 realisations per cell (robust ~2 s per fit),
-    # and a replicate on fresh records (seed 1)
+    # and a replicate on fresh records (seed 1); the scripts resume, so old tables go first
+    rm -rf results/robust_vs_literal results/robust_vs_literal_seed1
     python benchmarks/robust_vs_literal.py --realisations 100 --chunk-size 8 --quiet \
         --out results/robust_vs_literal
     python benchmarks/robust_vs_literal.py --realisations 100 --chunk-size 8 --seed 1 --quiet \
@@ -34,6 +35,14 @@ sweeps() {  # issue 3: SNR x N sweeps of both paper examples, 500 realisations p
     jaxcascade sweep --example 2 --snr 25 --n 2000 --realisations 500 --seed 0 \
         --out results/sweep_example2_paper.parquet
 }
+literal() {  # issue 11: the paper's iteration under each reading of its first step
+    rm -rf results/literal_readings
+    python benchmarks/literal_readings.py --quiet --out results/literal_readings
+}
+efficiency() {  # issue 13: literal and robust against the Cramer-Rao bound
+    rm -rf results/efficiency
+    python benchmarks/efficiency.py --realisations 100 --out results/efficiency
+}
 loop() {  # issue 5: undeclared effects, and the measured friction-damper records
     python benchmarks/effects_loop.py --out results/effects_loop
     bash benchmarks/brfd_loop.sh
@@ -46,7 +55,7 @@ reproduce() {  # issue 2: the paper's examples
 }
 
 steps=("$@")
-[ ${#steps[@]} -gt 0 ] || steps=(bench distributed robust sweeps loop reproduce)
+[ ${#steps[@]} -gt 0 ] || steps=(bench distributed robust sweeps literal efficiency loop reproduce)
 for step in "${steps[@]}"; do
     echo "== $step"
     "$step"
