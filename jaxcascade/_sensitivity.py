@@ -1,140 +1,107 @@
 """The simulated output and its Jacobian with respect to the parameters, by forward
 sensitivities (what output-error Levenberg-Marquardt needs at every step).
 
-Differentiating `simulate` with `jax.jacfwd` pushes P tangents through three sequential
-scans; the structure of the cascade gives the same Jacobian more cheaply:
+Differentiating `simulate` with `jax.jacfwd` pushes P tangents through the generic
+graph of three sequential scans; the structure of the cascade gives the same Jacobian
+more cheaply, in one pass:
 
 - NS and the numerator of LD are static: the tangents of `w(t) = sum_i a_i v(t-i)` with
-  respect to the slopes, breakpoints and `a` are elementwise (`jax.jacfwd` of a
-  vectorised function, no scan).
-- LD's pole recursion is linear and time-invariant with zero initial conditions, so the
-  tangents of `x` are the same filter applied to the tangents of `w`, one blocked scan
-  for all columns (`_filter`, as `_simulate.linear_block`), and `dx/db_j` is
-  `-x(t-j)` filtered, i.e. `-xx(t-j)` with `xx` the filter applied twice.
-- The backlash switches g1, g2 are piecewise constant in the parameters (their
-  derivative is zero almost everywhere), so eq. (9) differentiates to
-  `dy(t) = g1 (dx + dcL) + g2 (dmR (x - cR) + mR (dx - dcR)) + (1 - g1)(1 - g2) dy(t-1)`:
-  on a line the tangent is set, in the dead zone it is held. So `dy(t)` is the set
-  value at the last sample on a line (`lax.cummax` over indices, a gather): the only
-  sequential pass left is the backlash itself (`modes`).
+  respect to the slopes, breakpoints and `a` are written out elementwise (`_numerator`:
+  `dv/dM = (u - D) h(...)`, `dv/dD = -M h(...)`), no scan.
+- LD's pole recursion is linear: `dx(t) = dw(t) - sum_j b_j dx(t-j)`, plus `-x(t-j)` in
+  the column of `b_j`.
+- The backlash switches g1, g2 are piecewise constant in the parameters (derivative
+  zero almost everywhere), so eq. (9) differentiates to
+  `dy(t) = g1 (dx + dcL) + g2 (dmR (x - cR) + mR (dx - dcR)) + (1 - g1)(1 - g2) dy(t-1)`.
 
-Exact up to rounding: it equals `jax.jacfwd` of `_simulate.signals(...).y` (the test
-compares them); the blocked filter and the switching rule are those of `_simulate`.
+One `lax.scan` over time carries LD's past outputs and their tangents and the backlash
+state and its tangent (`output_jacobian`); per step it costs O(p P) flops, so the scan's
+per-step overhead, not arithmetic, sets its time. Exact up to rounding: it equals
+`jax.jacfwd` of `_simulate.signals(...).y` (the test compares them; the switching rule
+is `_simulate.backlash_switches`).
 """
 
 from __future__ import annotations
-
-from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from ._model import CascadeParams, Orders
-from ._simulate import backlash_switches, pwl, shift
+from ._model import CascadeParams
+from ._simulate import backlash_switches, shift
 
 
-class Trajectory(NamedTuple):
-    """One simulated record with what its Jacobian needs (each `Float[Array, " T"]`)."""
-
-    w: Array  # LD's numerator output, sum_i a_i v(t - i)
-    x: Array  # LD's output
-    y: Array  # the cascade's output
-    g1: Array  # left line active (0/1)
-    g2: Array  # right line active (0/1)
+def _shift_rows(matrix, lag: int):
+    return jnp.concatenate([jnp.zeros((lag, matrix.shape[1]), matrix.dtype), matrix[:-lag]])
 
 
-def _numerator(vector, orders: Orders, u):
-    # w(t) = sum_i a_i v(t - i), a_1 = 1, as a function of the NS and `a` entries
-    params = CascadeParams.from_vector(
-        jnp.concatenate([vector, jnp.zeros((orders.size - vector.shape[0],), vector.dtype)]),
-        orders,
-        check=False,
-    )
-    v = pwl(params, u)
-    a = jnp.concatenate([jnp.ones((1,), u.dtype), params.a.astype(u.dtype)])
-    return sum(a[i - 1] * shift(v, i) for i in range(1, orders.r + 1))
-
-
-def _filter(b, columns, block: int):
-    """`x(t) = w(t) - sum_j b_j x(t-j)` for every column of `columns` (`"T K"`), zero
-    initial conditions, in blocks of `block` samples (`_simulate._poles_blocked`)."""
-    p, dtype = b.shape[0], columns.dtype
-    if p == 0:
-        return columns
-    T, K = columns.shape
-    block = min(block, T)
-    basis = jnp.concatenate([jnp.eye(p, dtype=dtype), jnp.zeros((p, 1), dtype)], axis=1)
-    drive = jnp.zeros((block, p + 1), dtype).at[0, p].set(1.0)
-
-    def response(past, drive_t):
-        x_t = drive_t - b @ past
-        return jnp.concatenate([x_t[None], past[:-1]]), x_t
-
-    _, impulse = jax.lax.scan(response, basis, drive)
-    G, h = impulse[:, :p], impulse[:, p]
-    lag = jnp.arange(block)[:, None] - jnp.arange(block)[None, :]
-    H = jnp.where(lag >= 0, h[jnp.clip(lag, 0, None)], 0.0)
-    count = -(-T // block)
-    padded = jnp.concatenate([columns, jnp.zeros((count * block - T, K), dtype)])
-
-    def step(past, w_block):
-        x_block = H @ w_block + G @ past
-        return x_block[::-1][:p], x_block
-
-    _, x = jax.lax.scan(step, jnp.zeros((p, K), dtype), padded.reshape(count, block, K))
-    return x.reshape(count * block, K)[:T]
-
-
-def modes(params: CascadeParams, x: Float[Array, " T"], *, unroll: int = 8):
-    """The backlash (eq. 9, as `_simulate.backlash`) with its switches: `(y, g1, g2)`."""
-    cL, mR, cR = (jnp.asarray(c, x.dtype) for c in (params.cL, params.mR, params.cR))
-
-    def step(y_prev, x_t):
-        g1, g2 = backlash_switches(x_t, y_prev, cL, mR, cR)
-        y_t = g1 * (x_t + cL) + g2 * mR * (x_t - cR) + (1 - g1) * (1 - g2) * y_prev
-        return y_t, (y_t, g1, g2)
-
-    _, (y, g1, g2) = jax.lax.scan(step, jnp.zeros((), x.dtype), x, unroll=unroll)
-    return y, g1, g2
-
-
-def trajectory(params: CascadeParams, u: Float[Array, " T"], *, block: int = 64) -> Trajectory:
-    """Simulate one record (noise-free), keeping what `jacobian` needs."""
+def _numerator(params: CascadeParams, u):
+    """`w(t) = sum_i a_i v(t - i)` (a_1 = 1) and its derivatives with respect to the
+    NS entries and `a` (columns in `Orders.names` order, up to `b`): `(w, dw)`."""
     o = params.orders
-    vector = params.to_vector().astype(u.dtype)
-    w = _numerator(vector[: o.slices["b"].start], o, u)
-    x = _filter(vector[o.slices["b"]], w[:, None], block)[:, 0]
-    y, g1, g2 = modes(params, x)
-    return Trajectory(w, x, y, g1, g2)
+    dtype = u.dtype
+    zero = jnp.zeros((1,), dtype)
+    DR = jnp.concatenate([zero, params.DR.astype(dtype)])
+    DL = jnp.concatenate([zero, params.DL.astype(dtype)])
+    on_right = (u[:, None] > DR[None, :]).astype(dtype)  # T x nR, h(D - u) of eq. 1
+    on_left = (u[:, None] < DL[None, :]).astype(dtype)
+    right = on_right * (u[:, None] - DR[None, :])
+    left = on_left * (u[:, None] - DL[None, :])
+    v = right @ params.MR.astype(dtype) + left @ params.ML.astype(dtype)
+    dv = jnp.concatenate(
+        [
+            right,
+            -on_right[:, 1:] * params.MR[1:].astype(dtype),
+            left,
+            -on_left[:, 1:] * params.ML[1:].astype(dtype),
+        ],
+        axis=1,
+    )
+    a = jnp.concatenate([jnp.ones((1,), dtype), params.a.astype(dtype)])
+    w = sum(a[i - 1] * shift(v, i) for i in range(1, o.r + 1))
+    dw = sum(a[i - 1] * _shift_rows(dv, i) for i in range(1, o.r + 1))
+    if o.r > 1:
+        dw = jnp.concatenate([dw, jnp.stack([shift(v, i) for i in range(2, o.r + 1)], 1)], 1)
+    return w, dw
 
 
-def jacobian(
-    params: CascadeParams, u: Float[Array, " T"], path: Trajectory, *, block: int = 32
-) -> Float[Array, "T P"]:
-    """`d y(t) / d theta` (columns in `Orders.names` order) along `path = trajectory(params, u)`."""
+def output_jacobian(
+    params: CascadeParams, u: Float[Array, " T"]
+) -> tuple[Float[Array, " T"], Float[Array, "T P"]]:
+    """Noise-free output `y` of one record and `d y(t) / d theta` (columns in
+    `Orders.names` order), in one scan (module docstring)."""
     o = params.orders
     dtype = u.dtype
     vector = params.to_vector().astype(dtype)
-    static = o.slices["b"].start
     b = vector[o.slices["b"]]
-    mR, cR = vector[-2], vector[-1]
-    # NS and a: d w / d theta, elementwise in time
-    dw = jax.jacfwd(_numerator)(vector[:static], o, u)  # T x static
-    if o.p:
-        # d x / d b_j = filter(-x(t - j)) = -xx(t - j): the filter is LTI from rest
-        xx = _filter(b, path.x[:, None], block)[:, 0]
-        dx_db = -jnp.stack([shift(xx, j) for j in range(1, o.p + 1)], 1)
-        dx = jnp.concatenate([_filter(b, dw, block), dx_db], 1)
-    else:
-        dx = dw
-    T = u.shape[0]
-    zeros = jnp.zeros((T, 3), dtype)
-    dx = jnp.concatenate([dx, zeros], 1)
-    e = jnp.eye(o.size, dtype=dtype)
-    g1, g2 = path.g1[:, None], path.g2[:, None]
-    # the value set on a line: d/dtheta of g1 (x + cL) + g2 mR (x - cR)
-    set_value = g1 * (dx + e[-3]) + g2 * (e[-2] * (path.x - cR)[:, None] + mR * (dx - e[-1]))
-    on_line = (path.g1 + path.g2) > 0
-    last = jax.lax.cummax(jnp.where(on_line, jnp.arange(T), -1))
-    return jnp.where((last >= 0)[:, None], set_value[jnp.clip(last, 0, None)], 0.0)
+    cL, mR, cR = vector[-3], vector[-2], vector[-1]
+    w, dw = _numerator(params, u)
+    e_cL, e_mR, e_cR = jnp.eye(3, dtype=dtype)
+
+    def step(carry, inputs):
+        x_past, dx_past, y_prev, dy_prev = carry  # p, p x (P - 3), scalar, P
+        w_t, dw_t = inputs
+        x_t = w_t - b @ x_past
+        dx_t = jnp.concatenate([dw_t, -x_past]) - b @ dx_past
+        g1, g2 = backlash_switches(x_t, y_prev, cL, mR, cR)
+        y_t = g1 * (x_t + cL) + g2 * mR * (x_t - cR) + (1 - g1) * (1 - g2) * y_prev
+        dx_full = jnp.concatenate([dx_t, jnp.zeros((3,), dtype)])
+        on_line = g1 * (dx_full + jnp.concatenate([jnp.zeros_like(dx_t), e_cL]))
+        on_line += g2 * (
+            jnp.concatenate([jnp.zeros_like(dx_t), e_mR * (x_t - cR) - mR * e_cR]) + mR * dx_full
+        )
+        dy_t = on_line + (1 - g1) * (1 - g2) * dy_prev
+        if o.p:
+            x_past = jnp.concatenate([x_t[None], x_past[:-1]])
+            dx_past = jnp.concatenate([dx_t[None], dx_past[:-1]])
+        return (x_past, dx_past, y_t, dy_t), (y_t, dy_t)
+
+    P = o.size
+    carry = (
+        jnp.zeros((o.p,), dtype),
+        jnp.zeros((o.p, P - 3), dtype),
+        jnp.zeros((), dtype),
+        jnp.zeros((P,), dtype),
+    )
+    _, (y, J) = jax.lax.scan(step, carry, (w, dw))
+    return y, J
