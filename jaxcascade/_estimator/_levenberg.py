@@ -58,21 +58,20 @@ def levenberg_marquardt(
     **Returns:** `(z, cost, status, steps)`: the estimate, its mean squared residual
     (`inf` if non-finite), a `Status` code and the number of steps taken.
     """
-    r, JtJ, Jtr = evaluate(z0)
-    cost = r @ r
-    ok = jnp.isfinite(cost) & jnp.all(jnp.isfinite(JtJ)) & jnp.all(jnp.isfinite(Jtr))
-    status = jnp.where(ok, _RUNNING, Status.diverged).astype(jnp.int32)
     dtype = z0.dtype
 
+    # The start is evaluated by the loop's first pass (a zero step, always accepted when
+    # finite): one copy of `evaluate` in the compiled program, not two.
     def running(state):
-        return (state[8] == _RUNNING) & (state[7] < max_steps)  # status, step
+        return (state[8] == _RUNNING) & (state[7] <= max_steps)  # status, step
 
     def body(state):
         z, r, cost, JtJ, Jtr, lam, nu, step, status = state
         diagonal = jnp.diag(JtJ)
         scale = jnp.maximum(diagonal, 1e-12 * jnp.max(diagonal) + jnp.finfo(dtype).tiny)
         factor, factored = cholesky(JtJ + lam * jnp.diag(scale))
-        delta = -cho_solve(factor, Jtr)
+        first = step == 0
+        delta = jnp.where(first, 0.0, -cho_solve(factor, Jtr))
         z_new = z + delta
         r_new, JtJ_new, Jtr_new = evaluate(z_new)
         cost_new = r_new @ r_new
@@ -84,15 +83,17 @@ def levenberg_marquardt(
             & jnp.all(jnp.isfinite(Jtr_new))
             & jnp.all(jnp.isfinite(delta))
         )
-        accept = factored & finite & (predicted > 0) & (rho > 1e-4)
+        accept = finite & (first | (factored & (predicted > 0) & (rho > 1e-4)))
         small_step = jnp.all(jnp.abs(delta) <= atol + rtol * jnp.abs(z_new))
         cauchy = small_step & jnp.all(jnp.abs(r_new - r) <= atol + rtol * jnp.abs(r_new))
         flat = (cost - cost_new <= rtol * cost) & (2 * predicted <= rtol * cost)
-        done = jnp.where(accept, cauchy | flat, factored & finite & small_step)
-        status = jnp.where(done, Status.converged, status).astype(jnp.int32)
+        done = jnp.where(accept, cauchy | flat, factored & finite & small_step) & ~first
+        status = jnp.where(done, Status.converged, status)
+        status = jnp.where(first & ~finite, Status.diverged, status).astype(jnp.int32)
         lam_new = jnp.where(
             accept, lam * jnp.maximum(1 / 3, 1 - (2 * rho - 1) ** 3), lam * nu
         )
+        lam_new = jnp.where(first, lam, lam_new)
         nu_new = jnp.where(accept, 2.0, 2 * nu)
 
         def pick(new, old):
@@ -111,8 +112,21 @@ def levenberg_marquardt(
         )
 
     one = jnp.ones((), dtype)
-    state = (z0, r, cost, JtJ, Jtr, damping * one, 2 * one, jnp.zeros((), jnp.int32), status)
+    size = z0.shape[0]
+    state = (
+        z0,
+        jnp.zeros(jax.eval_shape(evaluate, z0)[0].shape, dtype),
+        jnp.asarray(jnp.inf, dtype),
+        jnp.eye(size, dtype=dtype),
+        jnp.zeros((size,), dtype),
+        damping * one,
+        2 * one,
+        jnp.zeros((), jnp.int32),
+        jnp.asarray(_RUNNING, jnp.int32),
+    )
+    # max_steps counts the steps after the start's evaluation
     z, r, cost, _, _, _, _, steps, status = jax.lax.while_loop(running, body, state)
+    steps = jnp.maximum(steps - 1, 0)
     status = jnp.where(status == _RUNNING, Status.max_iterations, status).astype(jnp.int32)
     mean = cost / r.shape[0]
     return z, jnp.where(jnp.isfinite(mean), mean, jnp.inf), status, steps
