@@ -306,16 +306,24 @@ def _multistart(
     )
     full_cost = jax.vmap(lambda p: jnp.mean(simulation_error(p, u, y) ** 2))(first.params)
     chosen = _best(full_cost, n_refine)
-    second = jax.vmap(lambda p: refine(p, u, y, max_steps=max_steps[1], **tolerances))(
-        _take(first.params, chosen)
-    )
-    best = _best(second.cost, 1)[0]
+    # The refinement of the best and its restart from the best (below) are one call
+    # site, a scan of two phases: one compiled copy of Levenberg-Marquardt, not two.
+    def phase(carry, _):
+        fits = jax.vmap(lambda p: refine(p, u, y, max_steps=max_steps[1], **tolerances))(carry)
+        best = _best(fits.cost, 1)[0]
+        again = jax.tree_util.tree_map(
+            lambda leaf: jnp.broadcast_to(leaf[best], leaf.shape), fits.params
+        )
+        return again, (fits, best)
+
+    _, (phases, bests) = jax.lax.scan(phase, _take(first.params, chosen), None, length=2)
+    second, best = _take(phases, 0), bests[0]
     final = _take(second, best)
     # The backlash makes the simulation error piecewise smooth: one restart from the
     # chosen estimate tells a minimum on a kink (it terminates within a few steps, or
     # moves neither the estimate nor the cost by more than `rtol`, relative, the
     # criterion of MATLAB's lsqnonlin) from a fit that is still going somewhere.
-    restart = refine(final.params, u, y, max_steps=max_steps[1], **tolerances)
+    restart = _take(_take(phases, 1), 0)
     before, after = final.params.to_vector(), restart.params.to_vector()
     moved = jnp.max(jnp.abs(after - before) / (1 + jnp.abs(before)))
     settled = (moved <= rtol) & (jnp.abs(restart.cost - final.cost) <= rtol * final.cost)
