@@ -159,10 +159,11 @@ def normal_equations(z, orders: Orders, u, y, u_min, u_max):
     the small Jacobian of `from_unconstrained`."""
 
     def vector(z):
-        return from_unconstrained(z, orders, u_min, u_max).to_vector()
+        value = from_unconstrained(z, orders, u_min, u_max).to_vector()
+        return value, value
 
-    chain = jax.jacfwd(vector)(z)
-    params = CascadeParams.from_vector(vector(z), orders, check=False)
+    chain, value = jax.jacfwd(vector, has_aux=True)(z)  # one trace of the map, not two
+    params = CascadeParams.from_vector(value, orders, check=False)
     y_sim, J = output_jacobian(params, u)
     J = J @ chain
     r = y_sim - y
