@@ -90,9 +90,7 @@ def levenberg_marquardt(
         done = jnp.where(accept, cauchy | flat, factored & finite & small_step) & ~first
         status = jnp.where(done, Status.converged, status)
         status = jnp.where(first & ~finite, Status.diverged, status).astype(jnp.int32)
-        lam_new = jnp.where(
-            accept, lam * jnp.maximum(1 / 3, 1 - (2 * rho - 1) ** 3), lam * nu
-        )
+        lam_new = jnp.where(accept, lam * jnp.maximum(1 / 3, 1 - (2 * rho - 1) ** 3), lam * nu)
         lam_new = jnp.where(first, lam, lam_new)
         nu_new = jnp.where(accept, 2.0, 2 * nu)
 

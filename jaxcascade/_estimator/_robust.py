@@ -62,6 +62,7 @@ from ._literal import initial_guess, voros
 from ._refine import refine, simulation_error
 from ._solution import PATH_ADAPTIVE, PATH_MULTISTART, Solution, finite
 
+
 def _best(costs, k):
     costs = jnp.where(jnp.isfinite(costs), costs, jnp.inf)
     return jnp.argsort(costs)[:k]
@@ -257,9 +258,7 @@ def _fallback(multistart, size: int):
         def batched(leaf, flag):
             return leaf if flag else jnp.broadcast_to(leaf, (axis_size, *jnp.shape(leaf)))
 
-        u, y, key, stage = jax.tree_util.tree_map(
-            batched, (u, y, key, stage), tuple(in_batched)
-        )
+        u, y, key, stage = jax.tree_util.tree_map(batched, (u, y, key, stage), tuple(in_batched))
         width = min(size, axis_size)
         rounds = -(-axis_size // width)
         failed = ~stage.accepted
@@ -278,9 +277,7 @@ def _fallback(multistart, size: int):
             chosen = _take((u, y, key, stage), index)
             result = jax.vmap(multistart)(*chosen)
             target = jnp.where(valid, index, axis_size)  # out of range: dropped
-            out = jax.tree_util.tree_map(
-                lambda o, r: o.at[target].set(r, mode="drop"), out, result
-            )
+            out = jax.tree_util.tree_map(lambda o, r: o.at[target].set(r, mode="drop"), out, result)
             return i + 1, out
 
         _, out = jax.lax.while_loop(more, one_round, (jnp.zeros((), count.dtype), stage.solution))
@@ -290,8 +287,19 @@ def _fallback(multistart, size: int):
 
 
 def _multistart(
-    u, y, key, stage: _Stage, *, orders, n_starts, n_refine, subset, max_steps, literal_start,
-    rtol, atol,
+    u,
+    y,
+    key,
+    stage: _Stage,
+    *,
+    orders,
+    n_starts,
+    n_refine,
+    subset,
+    max_steps,
+    literal_start,
+    rtol,
+    atol,
 ) -> Solution:
     """Steps 2 and 3 (module docstring) for one record."""
     dtype = u.dtype
@@ -311,6 +319,7 @@ def _multistart(
     )
     full_cost = jax.vmap(lambda p: jnp.mean(simulation_error(p, u, y) ** 2))(first.params)
     chosen = _best(full_cost, n_refine)
+
     # The refinement of the best and its restart from the best (below) are one call
     # site, a scan of two phases: one compiled copy of Levenberg-Marquardt, not two.
     def phase(carry, _):
