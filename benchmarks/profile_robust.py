@@ -79,8 +79,10 @@ def main(argv=None) -> int:
         "multistart": (jax.vmap(multistart), (u, y, keys, stage)),
         "robust": (jax.vmap(lambda u, y, k: R._robust(u, y, orders, k)), (u, y, keys)),
     }
-    print(f"{args.system}: N = {n}, batch {args.batch}; adaptive path accepted "
-          f"{int(stage.accepted.sum())} of {args.batch}")
+    print(
+        f"{args.system}: N = {n}, batch {args.batch}; adaptive path accepted "
+        f"{int(stage.accepted.sum())} of {args.batch}"
+    )
     for name, (function, arguments) in stages.items():
         start = time.perf_counter()
         compiled = jax.jit(function).lower(*arguments).compile()
