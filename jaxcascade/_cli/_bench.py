@@ -142,7 +142,6 @@ def add_parser(subparsers) -> None:
             "baseline and the float64 FLOP floor of this machine."
         ),
         epilog=examples(
-            "jaxcascade bench",
             "jaxcascade bench --realisations 200 --n 2000 --json --out results/bench.csv",
             "jaxcascade bench --estimator robust --system example2 --json",
         ),
