@@ -12,6 +12,9 @@ bench() {  # issue 6: throughput vs NumPy/SciPy and the FLOP floor; scaling
     jaxcascade bench --backend xla --out results/bench_xla.csv --json > results/bench_xla.json
     python benchmarks/scaling.py --out results/scaling.csv
 }
+bench_robust() {  # issue 16: robust on example1, example2 and the random family, 256 records each
+    python benchmarks/bench_robust.py --out results/bench_robust
+}
 distributed() {  # issue 7: in-process vs 1 and 2 local Dask workers
     python benchmarks/distributed_throughput.py --realisations 2048 --n 2000 --workers 1,2 \
         --out results/distributed_throughput.csv
@@ -55,7 +58,7 @@ reproduce() {  # issue 2: the paper's examples
 }
 
 steps=("$@")
-[ ${#steps[@]} -gt 0 ] || steps=(bench distributed robust sweeps literal efficiency loop reproduce)
+[ ${#steps[@]} -gt 0 ] || steps=(bench bench_robust distributed robust sweeps literal efficiency loop reproduce)
 for step in "${steps[@]}"; do
     echo "== $step"
     "$step"

@@ -9,9 +9,10 @@ Model and simulation
     random-system prior).
 Estimators (each fits one record and returns a `Solution` with a `Status`)
     `Literal` / `voros` (the paper's iteration, eqs. 19-28), `Robust` / `robust`
-    (multi-start output-error least squares), `refine`; the registry `ESTIMATORS` and
-    `estimator` (`estimator(name, **settings)`); `Estimator`, the interface; `initial_guess`,
-    `regression` (the key-term regression, eqs. 15-18); `status_names` (codes to names).
+    (output-error least squares from the literal estimate, multi-start fallback),
+    `refine`; the registry `ESTIMATORS` and `estimator` (`estimator(name, **settings)`);
+    `Estimator`, the interface; `initial_guess`, `regression` (the key-term regression,
+    eqs. 15-18); `status_names` (codes to names).
     Records are checked before any work: one 1-D record of real, finite numbers (lists
     and NumPy arrays are converted), `u` and `y` of equal length, at least
     `Orders.min_samples` samples; anything else is a `ValueError` or `TypeError` saying

@@ -92,3 +92,20 @@ def test_scaling_runner_on_tiny_sizes(tmp_path):
         assert float(row["peak_mem_mb"]) >= float(row["base_mem_mb"]) > 0
         assert float(row["fits_per_s"]) > 0
     assert figure.stat().st_size > 0
+
+
+def test_bench_robust_json_keys(capsys):
+    from jaxcascade._benchmark._robust import SUMMARY_KEYS as ROBUST_KEYS
+
+    argv = ["bench", "--estimator", "robust", "--system", "random", "--realisations", "2"]
+    argv += ["--n", "300", "--baseline-realisations", "1", "--repeats", "1", "--json"]
+    assert main(argv) == 0
+    figures = json.loads(capsys.readouterr().out)
+    assert tuple(figures) == ROBUST_KEYS
+    assert (figures["estimator"], figures["system"]) == ("robust", "random")
+    for key in ("fits_per_s", "compile_s", "baseline_fits_per_s", "ratio"):
+        assert math.isfinite(figures[key]) and figures[key] > 0, key
+    assert 0 <= figures["recovered"] <= 1
+    assert figures["ratio"] == pytest.approx(
+        figures["fits_per_s"] / figures["baseline_fits_per_s"], rel=1e-12
+    )

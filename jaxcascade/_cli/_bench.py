@@ -7,8 +7,10 @@ import json
 import pathlib
 import time
 
+from .._benchmark import _robust as robust_bench
 from .._benchmark._timing import run_benchmark, summary
 from .._examples import example as get_example
+from .._model import Orders
 from ._common import CLIError, examples, strict_json, writable_folder
 
 
@@ -35,7 +37,8 @@ def _report(r: dict) -> str:
 
 def _write_csv(record: dict, path: pathlib.Path) -> None:
     row = {key: value for key, value in record.items() if key != "status_counts"}
-    row["status_counts"] = json.dumps(record["status_counts"])
+    if "status_counts" in record:
+        row["status_counts"] = json.dumps(record["status_counts"])
     row["jax_version"] = __import__("jax").__version__
     row["date"] = time.strftime("%Y-%m-%dT%H:%M:%S")
     with open(path, "w", newline="") as file:
@@ -44,7 +47,57 @@ def _write_csv(record: dict, path: pathlib.Path) -> None:
         writer.writerow(row)
 
 
+def _robust_report(r: dict) -> str:
+    return "\n".join(
+        [
+            f"workload: robust on {r['system']}, N = {r['n']}, SNR {r['snr']:g}, "
+            f"{r['realisations']} realisations",
+            f"device: {r['device']}",
+            f"jaxcascade: {r['fits_per_s']:.1f} fits/s ({r['run_s']:.2f} s per run; compile "
+            f"{r['compile_s']:.2f} s); recovered {r['recovered']:.3f} (converged "
+            f"{r['converged']:.3f}, adaptive path {r['adaptive_fraction']:.3f})",
+            f"scipy baseline: {r['baseline_fits_per_s']:.3f} fits/s "
+            f"({r['baseline_realisations']} realisations in {r['baseline_s']:.1f} s)",
+            f"ratio to baseline: {r['ratio']:.1f}",
+        ]
+    )
+
+
+def run_robust_bench(args) -> int:
+    n = args.n if args.n is not None else robust_bench.system_defaults(args.system)[0]
+    realisations = args.realisations if args.realisations is not None else 256
+    baseline = args.baseline_realisations if args.baseline_realisations is not None else 8
+    checks = {
+        "--realisations": (realisations, 1),
+        "--n": (n, Orders().min_samples),
+        "--baseline-realisations": (baseline, 1),
+        "--repeats": (args.repeats, 1),
+    }
+    for flag, (value, low) in checks.items():
+        if value < low:
+            raise CLIError(f"{flag} must be at least {low}, got {value}.")
+    out = pathlib.Path(args.out) if args.out else None
+    if out is not None:
+        writable_folder(out.parent, "--out")
+    record = robust_bench.run_benchmark(
+        args.system, realisations, baseline, n, args.repeats, args.seed
+    )
+    if out is not None:
+        _write_csv(record, out)
+    print(strict_json(robust_bench.summary(record)) if args.json else _robust_report(record))
+    return 0
+
+
 def run_bench(args) -> int:
+    if args.estimator == "robust":
+        return run_robust_bench(args)
+    if args.system != "example1":
+        raise CLIError("--system applies to --estimator robust (the literal bench is --example).")
+    args.realisations = 1000 if args.realisations is None else args.realisations
+    args.n = 4000 if args.n is None else args.n
+    args.baseline_realisations = (
+        20 if args.baseline_realisations is None else args.baseline_realisations
+    )
     ex = get_example(args.example)
     checks = {
         "--realisations": (args.realisations, 1),
@@ -89,20 +142,42 @@ def add_parser(subparsers) -> None:
             "baseline and the float64 FLOP floor of this machine."
         ),
         epilog=examples(
-            "jaxcascade bench",
             "jaxcascade bench --realisations 200 --n 2000 --json --out results/bench.csv",
+            "jaxcascade bench --estimator robust --system example2 --json",
         ),
     )
-    parser.add_argument("--realisations", type=int, default=1000, metavar="R")
-    parser.add_argument("--n", type=int, default=4000, metavar="N", help="samples per record")
+    parser.add_argument(
+        "--estimator",
+        default="literal",
+        choices=("literal", "robust"),
+        help="literal (default): a fixed number of Vörös iterations; robust: `robust` at "
+        "its defaults against a SciPy output-error multi-start",
+    )
+    parser.add_argument(
+        "--system",
+        default="example1",
+        choices=tuple(robust_bench.SYSTEMS),
+        help="robust: the system (example1 N 4000 SNR 25, example2 N 2000 SNR 25, random: "
+        "the random family, N 3000 SNR 30)",
+    )
+    parser.add_argument(
+        "--realisations", type=int, default=None, metavar="R", help="default 1000; robust 256"
+    )
+    parser.add_argument(
+        "--n",
+        type=int,
+        default=None,
+        metavar="N",
+        help="samples per record (default 4000; robust: the system's)",
+    )
     parser.add_argument("--iterations", type=int, default=20, metavar="K")
     parser.add_argument("--example", type=int, default=1, choices=(1, 2))
     parser.add_argument(
         "--baseline-realisations",
         type=int,
-        default=20,
+        default=None,
         metavar="B",
-        help="realisations timed with the NumPy baseline (default 20)",
+        help="realisations timed with the baseline (default 20; robust 8)",
     )
     parser.add_argument(
         "--baseline-threads",
@@ -113,7 +188,9 @@ def add_parser(subparsers) -> None:
     parser.add_argument(
         "--matmul-size", type=int, default=2048, help="size of the float64 matmul for the floor"
     )
-    parser.add_argument("--repeats", type=int, default=3, help="timed runs; the best counts")
+    parser.add_argument(
+        "--repeats", type=int, default=3, help="timed runs; the best counts (robust: 1 is enough)"
+    )
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument(
         "--backend",

@@ -25,7 +25,7 @@ from .._normal_equations import (
 from .._status import Status
 from .._validate import is_traced, record
 from ._base import Estimator, setting
-from ._solution import Solution, finite
+from ._solution import PATH_ONLY, Solution, finite
 
 _RUNNING = -1
 # A revisited neighbourhood whose iterates all lie within this many tolerances of each
@@ -357,6 +357,7 @@ def _voros(
         cost=cost,
         status=status.astype(jnp.int32),
         cycle_amplitude=amplitude,
+        path=jnp.asarray(PATH_ONLY, jnp.int32),
     )
     return finite(solution, start)
 

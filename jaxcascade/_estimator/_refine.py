@@ -1,10 +1,12 @@
-"""Output-error refinement: least squares on the simulation error with optimistix.
+"""Output-error refinement: least squares on the simulation error.
 
 The simulation error `simulate(params, u) - y` is minimised over all parameters by
-Levenberg-Marquardt. Parameters are mapped to an unconstrained vector `z` so that every
-iterate is admissible by construction: breakpoints stay sorted inside the input range,
-`mR > 0`, gaps >= 0 and the linear block stays stable (it is parameterised by its
-reflection coefficients). JAX differentiates through the `lax.scan` recursions; the
+Levenberg-Marquardt: `refine` with this package's own (`_levenberg`, on the normal
+equations that `_sensitivity` forms from forward sensitivities), `least_squares` with
+optimistix's on any residual (the model-error loop's extended models). Parameters are
+mapped to an unconstrained vector `z` so that every iterate is admissible by
+construction: breakpoints stay sorted inside the input range, `mR > 0`, gaps >= 0 and
+the linear block stays stable (it is parameterised by its reflection coefficients). The
 backlash makes the error piecewise smooth, which is why several starts are used.
 """
 
@@ -17,8 +19,10 @@ import optimistix as optx
 from jaxtyping import Array, Float
 
 from .._model import CascadeParams, Orders, reflection_coefficients
+from .._sensitivity import output_jacobian
 from .._simulate import signals
 from .._status import Status
+from ._levenberg import levenberg_marquardt
 
 _REFLECTION_LIMIT = 0.999
 
@@ -149,6 +153,23 @@ def least_squares(residual, z0, args, *, max_steps: int = 100, rtol=1e-8, atol=1
     )
 
 
+def normal_equations(z, orders: Orders, u, y, u_min, u_max):
+    """`(r, JtJ, Jtr)` of the simulation error at the unconstrained `z`: the Jacobian with
+    respect to the parameters by forward sensitivities (`_sensitivity`), chained with
+    the small Jacobian of `from_unconstrained`."""
+
+    def vector(z):
+        value = from_unconstrained(z, orders, u_min, u_max).to_vector()
+        return value, value
+
+    chain, value = jax.jacfwd(vector, has_aux=True)(z)  # one trace of the map, not two
+    params = CascadeParams.from_vector(value, orders, check=False)
+    y_sim, J = output_jacobian(params, u)
+    J = J @ chain
+    r = y_sim - y
+    return r, J.T @ J, J.T @ r
+
+
 def refine(
     init: CascadeParams,
     u: Float[Array, " T"],
@@ -158,17 +179,17 @@ def refine(
     rtol: float = 1e-8,
     atol: float = 1e-10,
 ) -> Refined:
-    """Levenberg-Marquardt on the simulation error, from `init`. Never raises."""
+    """Levenberg-Marquardt (`_levenberg`) on the simulation error, from `init`, in the
+    admissible parameterisation. Never raises."""
     orders = init.orders
     u_min, u_max = jnp.min(u), jnp.max(u)
-
-    def residual(z, args):
-        u, y = args
-        return simulation_error(from_unconstrained(z, orders, u_min, u_max), u, y)
-
     z0 = to_unconstrained(init.astype(u.dtype), u_min, u_max)
-    z, cost, status, steps = least_squares(
-        residual, z0, (u, y), max_steps=max_steps, rtol=rtol, atol=atol
+    z, cost, status, steps = levenberg_marquardt(
+        lambda z: normal_equations(z, orders, u, y, u_min, u_max),
+        z0,
+        max_steps=max_steps,
+        rtol=rtol,
+        atol=atol,
     )
     return Refined(
         params=from_unconstrained(z, orders, u_min, u_max), cost=cost, status=status, steps=steps

@@ -9,6 +9,11 @@ from jaxtyping import Array, Float, Int
 from .._model import CascadeParams
 from .._status import Status
 
+# `Solution.path`: which of an estimator's paths gave the estimate.
+PATH_ONLY = 0  # the estimator has one path (the literal iteration)
+PATH_ADAPTIVE = 1  # robust: the literal estimate, refined, passed the residual test
+PATH_MULTISTART = 2  # robust: the multi-start fallback
+
 
 class Solution(eqx.Module):
     """Result of one fit. Under `vmap` every field gains a leading batch axis.
@@ -23,6 +28,8 @@ class Solution(eqx.Module):
     - `status`: `Int[Array, ""]`, a `Status` code.
     - `cycle_amplitude`: `Float[Array, ""]`, with status `cycled` the largest spread of
       one parameter over the cycle's iterates (the literal iteration); 0 otherwise.
+    - `path`: `Int[Array, ""]`, which path gave the estimate: `PATH_ONLY` (0) for an
+      estimator with one path; robust: `PATH_ADAPTIVE` (1) or `PATH_MULTISTART` (2).
     """
 
     params: CascadeParams
@@ -31,6 +38,7 @@ class Solution(eqx.Module):
     cost: Float[Array, ""]
     status: Int[Array, ""]
     cycle_amplitude: Float[Array, ""]
+    path: Int[Array, ""]
 
 
 def finite(solution: Solution, fallback: Float[Array, " P"]) -> Solution:
@@ -60,4 +68,5 @@ def finite(solution: Solution, fallback: Float[Array, " P"]) -> Solution:
         cycle_amplitude=jnp.where(
             jnp.isfinite(solution.cycle_amplitude), solution.cycle_amplitude, 0.0
         ),
+        path=solution.path,
     )

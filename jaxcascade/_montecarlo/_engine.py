@@ -144,6 +144,7 @@ def _realisation(
         "iterations": solution.iterations.astype(jnp.int32),
         "cost": jnp.asarray(solution.cost, dtype),
         "cycle_amplitude": jnp.asarray(solution.cycle_amplitude, dtype),
+        "path": solution.path.astype(jnp.int32),
         "nrmse": error,
         "admissible": admissible,
         "truth": truth_vector,

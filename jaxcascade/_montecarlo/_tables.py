@@ -8,7 +8,9 @@ index in the cell) and `key` (its PRNG key data as one uint64, enough to rerun i
 `admissible`, `recovered` (every parameter within `TOLERANCE` of the truth, whatever the
 status: a `cycled` fit at the statistical precision is recovered, and a status is a
 statement about the algorithm, not the estimate), `cycle_amplitude` (with status
-`cycled`, the largest spread of one parameter over the cycle; 0 otherwise), one column
+`cycled`, the largest spread of one parameter over the cycle; 0 otherwise),
+`robust_path` (`Solution.path` by name: `only` for a one-path estimator, `adaptive` or
+`multistart` for robust), one column
 per parameter with the estimate, `crlb_<name>` with the record's own output-error
 Cramér-Rao bound on its standard deviation (`_efficiency.crlb`; 0 noise-free),
 `true_<name>` with the
@@ -111,6 +113,8 @@ def realisation_frame(spec, cell, indices, outputs: dict) -> pd.DataFrame:
         "recovered": np.all(errors <= TOLERANCE, axis=1),
         "cycle_amplitude": np.asarray(outputs["cycle_amplitude"], dtype=np.float64),
     }
+    if "path" in outputs:  # tables written before it have no such column
+        columns["robust_path"] = _PATH_NAMES[np.clip(np.asarray(outputs["path"]), 0, 3)]
     for j, name in enumerate(names):
         columns[name] = estimates[:, j]
     for j, name in enumerate(names):
@@ -122,6 +126,10 @@ def realisation_frame(spec, cell, indices, outputs: dict) -> pd.DataFrame:
     for name in TIMING_COLUMNS:
         columns[name] = np.full(count, float(outputs.get(name, np.nan)))
     return pd.DataFrame(columns)
+
+
+# `Solution.path` codes (`_estimator._solution`) as names; 3: unknown
+_PATH_NAMES = np.array(["only", "adaptive", "multistart", "unknown"])
 
 
 # ---- summaries -------------------------------------------------------------------------

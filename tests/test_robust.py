@@ -1,0 +1,82 @@
+"""The robust estimator's adaptive path, its multi-start fallback and their batching."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxcascade as jc
+from jaxcascade._estimator._basin import residual_statistic
+from jaxcascade._estimator._robust import _adaptive, _robust
+from jaxcascade._estimator._solution import PATH_ADAPTIVE, PATH_MULTISTART
+
+ORDERS = jc.Orders()
+N = 400
+# small multi-start settings: these tests check paths and batching, not recovery
+SMALL = dict(n_starts=2, n_refine=1, max_steps=(8, 8), literal_start=False, fallback_batch=1)
+STAGE = dict(rtol=1e-6, atol=1e-9, steps=50, bound=5.0)
+
+
+@pytest.fixture(scope="module")
+def records():
+    """(easy, wrong basin): a noise-free random system the literal estimate plus
+    Levenberg-Marquardt fits exactly, and noise-free Example 1 at N = 400, where they end
+    in a wrong basin (cost ~0.04, the residual far from white)."""
+    easy_truth = jc.random_system(jax.random.PRNGKey(1), ORDERS)
+    u_easy = jc.uniform_input(jax.random.key(1), N)
+    u_hard = jc.uniform_input(jax.random.key(0), N)
+    return (
+        (u_easy, jc.simulate(easy_truth, u_easy), easy_truth),
+        (u_hard, jc.simulate(jc.example(1).params(), u_hard), jc.example(1).params()),
+    )
+
+
+@pytest.fixture(scope="module")
+def stages(records):
+    u = jnp.stack([r[0] for r in records])
+    y = jnp.stack([r[1] for r in records])
+    return jax.jit(jax.vmap(lambda u, y: _adaptive(u, y, ORDERS, **STAGE)))(u, y)
+
+
+def test_adaptive_path_accepts_an_easy_record(records, stages):
+    truth = records[0][2].to_vector()
+    assert bool(stages.accepted[0])
+    assert int(stages.solution.status[0]) == jc.Status.converged
+    np.testing.assert_allclose(stages.solution.params.to_vector()[0], truth, atol=1e-6)
+
+
+def test_adaptive_path_refuses_a_wrong_basin(records, stages):
+    assert not bool(stages.accepted[1])
+    u, y, _ = records[1]
+    residual = y - jc.simulate(
+        jc.CascadeParams.from_vector(stages.solution.params.to_vector()[1], ORDERS, check=False),
+        u,
+    )
+    assert float(residual_statistic(residual, u)) > 5.0
+
+
+def test_residual_statistic_of_white_noise_is_small():
+    # about standard normal for a white residual independent of u (threshold 5)
+    key_u, key_e = jax.random.split(jax.random.key(3))
+    stats = [
+        float(residual_statistic(jax.random.normal(k, (2000,)), jc.uniform_input(key_u, 2000)))
+        for k in jax.random.split(key_e, 8)
+    ]
+    assert max(stats) < 5.0 and min(stats) > -3.0
+
+
+def test_batched_fit_takes_each_records_path(records):
+    # Under vmap only the failures of step 1 run the multi-start (gathered by the
+    # custom_vmap rule, one per round here); each row equals the unbatched fit.
+    u = jnp.stack([records[0][0], records[1][0], records[0][0]])
+    y = jnp.stack([records[0][1], records[1][1], records[0][1]])
+    keys = jax.random.split(jax.random.PRNGKey(0), 3)
+    batched = jax.jit(jax.vmap(lambda u, y, k: _robust(u, y, ORDERS, k, **SMALL)))(u, y, keys)
+    assert batched.path.tolist() == [PATH_ADAPTIVE, PATH_MULTISTART, PATH_ADAPTIVE]
+    one = _robust(u[1], y[1], ORDERS, keys[1], **SMALL)
+    assert int(one.path) == PATH_MULTISTART
+    np.testing.assert_allclose(
+        batched.params.to_vector()[1], one.params.to_vector(), rtol=1e-9, atol=1e-12
+    )
+    assert int(batched.status[1]) == int(one.status)
+    np.testing.assert_allclose(batched.params.to_vector()[0], batched.params.to_vector()[2])
