@@ -13,6 +13,7 @@ LAYERS = [
     {"_model", "_status", "_metrics", "_batching", "_version", "_linalg"},
     {"_validate"},
     {"_simulate", "_prior", "_examples"},
+    {"_sensitivity"},
     {"_regression", "_normal_equations", "_fused"},
     {"_estimator", "_efficiency"},
     {"_data", "_arx", "_diagnose", "_effects", "_noise", "_loop", "_testing"},
