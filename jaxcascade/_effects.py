@@ -41,6 +41,9 @@ class Effect(eqx.Module):
     signature: ClassVar[tuple[str, ...]] = ()
     description: ClassVar[str] = ""
     fixed: ClassVar[tuple[str, ...]] = ()
+    # Levenberg-Marquardt steps of the joint refit; effects whose starts are already
+    # least-squares fits on the residual need few.
+    refine_steps: ClassVar[int] = 150
 
     def input(self, u):
         return u

@@ -51,6 +51,7 @@ class SlackFriction(Effect):
         "(|s| <= dead r) and plateaus upper, lower"
     )
     fractions: ClassVar[tuple[float, ...]] = (0.05, 0.1, 0.2, 0.35)
+    refine_steps: ClassVar[int] = 30
 
     threshold: Float[Array, ""]
     dead: Float[Array, ""]
@@ -77,8 +78,14 @@ class SlackFriction(Effect):
                 features.append(np.stack([up, down], 1))
                 targets.append(np.asarray(residual))
             upper, lower = ridge(features, targets)
-            rows.append((r, dead, upper, lower))
-        columns = np.array(rows).T
+            cost = sum(
+                float(np.sum((t - X @ [upper, lower]) ** 2))
+                for X, t in zip(features, targets, strict=True)
+            )
+            rows.append((cost, r, dead, upper, lower))
+        # The two best structures by least squares on the residual start the refit.
+        rows = sorted(rows)[:2]
+        columns = np.array(rows).T[1:]
         effect = _batched(
             cls, threshold=columns[0], dead=columns[1], upper=columns[2], lower=columns[3]
         )
@@ -100,6 +107,7 @@ class PrandtlIshlinskii(Effect):
     sizes: ClassVar[tuple[int, ...]] = (4, 8, 16)
     regularisations: ClassVar[tuple[float, ...]] = (1e-6, 1e-4, 1e-2)
     knot_values: ClassVar[tuple[float, ...]] = (0.5, 0.9)
+    refine_steps: ClassVar[int] = 20
 
     thresholds: Float[Array, " K"]
     knots: Float[Array, " J"]
@@ -181,6 +189,7 @@ class DahlFriction(Effect):
         "Dahl friction: dF = sigma du (1 - F/level sgn du), in parallel with the cascade"
     )
     fractions: ClassVar[tuple[float, ...]] = (0.02, 0.1, 0.3)
+    refine_steps: ClassVar[int] = 30
 
     sigma: Float[Array, ""]
     level: Float[Array, ""]
@@ -199,9 +208,14 @@ class DahlFriction(Effect):
             # the level then enters linearly.
             sigma = 1.0 / (fraction * span)
             X = [np.asarray(dahl(jnp.asarray(u), sigma, 1.0))[:, None] for u, _, _ in records]
-            (level,) = ridge(X, [np.asarray(r[2]) for r in records])
-            rows.append((sigma, level))
-        effect = _batched(cls, sigma=[r[0] for r in rows], level=[r[1] for r in rows])
+            targets = [np.asarray(r[2]) for r in records]
+            (level,) = ridge(X, targets)
+            cost = sum(
+                float(np.sum((t - level * x[:, 0]) ** 2)) for x, t in zip(X, targets, strict=True)
+            )
+            rows.append((cost, sigma, level))
+        rows = sorted(rows)[:1]
+        effect = _batched(cls, sigma=[r[1] for r in rows], level=[r[2] for r in rows])
         return [Start(cls.name, model.orders, _repeat(model, len(rows)), effect)]
 
     @classmethod
@@ -216,6 +230,7 @@ class InputBacklash(Effect):
         "backlash (play operator, half-width gap) in front of the static nonlinearity"
     )
     fractions: ClassVar[tuple[float, ...]] = (0.02, 0.05, 0.1, 0.2)
+    refine_steps: ClassVar[int] = 30
 
     gap: Float[Array, ""]
 

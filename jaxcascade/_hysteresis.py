@@ -129,3 +129,40 @@ def ridge(features, targets, weights=None, regularisation: float = 1e-6):
     size = gram.shape[0]
     gram = gram + regularisation * np.trace(gram) / size * np.eye(size)
     return np.linalg.solve(gram, rhs)
+
+
+_LUGRE = ("sigma0", "sigma1", "sigma2", "fc_pos", "fc_neg", "fs_pos", "fs_neg", "vs")
+
+
+def fit_lugre(records, dt: float, max_steps: int = 200) -> dict[str, float]:
+    """LuGre friction (`lugre`, plus an output offset) fitted by output-error
+    Levenberg-Marquardt on several records `[(u, y), ...]` jointly, each simulated from
+    rest; every parameter but the offset through its logarithm (positive). A peer model
+    for measured friction, in the records' units. Returns `{name: value}`."""
+    from ._estimator._refine import least_squares
+
+    us = tuple(jnp.asarray(u) for u, _ in records)
+    ys = tuple(jnp.asarray(y, us[0].dtype) for _, y in records)
+    span = float(max(np.max(np.abs(np.asarray(u))) for u, _ in records))
+    level = float(np.mean([np.quantile(np.abs(np.asarray(y)), 0.9) for _, y in records]))
+    speed = float(np.mean([np.std(np.diff(np.asarray(u))) / dt for u, _ in records]))
+    start = [level / (0.05 * span), 1e-3, 0.1 * level / speed, level, level]
+    start += [1.2 * level, 1.2 * level, speed]
+    z0 = jnp.asarray(np.log(start).tolist() + [0.0], us[0].dtype)
+
+    def model(z, u):
+        p = jnp.exp(z[:-1])
+        return lugre(u, dt, *p) + z[-1]
+
+    def residual(z, args):
+        return jnp.concatenate([model(z, u) - y for u, y in zip(us, ys, strict=True)])
+
+    z, *_ = jax.jit(lambda z0: least_squares(residual, z0, None, max_steps=max_steps))(z0)
+    z = np.asarray(z)
+    return {**dict(zip(_LUGRE, np.exp(z[:-1]).tolist(), strict=True)), "offset": float(z[-1])}
+
+
+def simulate_lugre(params: dict[str, float], u, dt: float):
+    """Force of a fitted LuGre model (`fit_lugre`) for the displacement `u`."""
+    u = jnp.asarray(u)
+    return lugre(u, dt, *(params[name] for name in _LUGRE)) + params["offset"]

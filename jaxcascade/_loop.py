@@ -313,7 +313,7 @@ def model_error_loop(
             effect = EFFECTS[name]
             best = None
             for start in effect.starts_records(model, records):
-                fitted, cost, status = refit(model, start, us, ys)
+                fitted, cost, status = refit(model, start, us, ys, effect.refine_steps)
                 if best is None or cost < best[1]:
                     best = (fitted, cost, start.label)
             fitted, _, label = best
