@@ -177,7 +177,8 @@ class SpectrumTest(_Serialisable):
 class HysteresisTest(_Serialisable):
     """Does the residual depend on the input's history beyond its present value?
 
-    - `direction`: residual means when the input increases and when it decreases (a
+    - `direction`: residual means (cubic in the input projected out, as below) when the
+      input increases and when it decreases (a
       `GroupTest`; a sample with zero increment keeps the last direction).
     - Stop-operator test: for each threshold `thresholds[k]` (a grid of fractions of the
       input span), the partial correlation `values[k]` of the residual with the stop
@@ -228,15 +229,6 @@ def hysteresis_test(
     rising = np.where(
         last >= 0, du[np.maximum(last, 0)] > 0, du[moving[0]] > 0 if moving.size else True
     )
-    direction = group_test(
-        "direction",
-        e,
-        np.where(rising, 0, 1),
-        ("increasing", "decreasing"),
-        [1.0, -1.0],
-        alpha,
-        lags,
-    )
     span = float(np.quantile(u, 0.995) - np.quantile(u, 0.005)) or 1.0
     thresholds = np.geomspace(0.01 * span, 0.5 * span, n_thresholds)
     z = stop_outputs(u, thresholds)
@@ -245,6 +237,15 @@ def hysteresis_test(
     q, _ = np.linalg.qr(basis)
     e_part = e - q @ (q.T @ e)
     z_part = z - q @ (q.T @ z)
+    direction = group_test(
+        "direction",
+        e_part,
+        np.where(rising, 0, 1),
+        ("increasing", "decreasing"),
+        [1.0, -1.0],
+        alpha,
+        lags,
+    )
     values = np.zeros(n_thresholds)
     t = np.zeros(n_thresholds)
     scales = np.full(n_thresholds, np.inf)  # standard error of each correlation

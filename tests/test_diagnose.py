@@ -187,3 +187,46 @@ def test_figures(tmp_path):
     figure = plot_correlation(tests.u2_e)
     assert "FAILED" in figure.axes[0].get_title()
     assert "passed" in plot_groups(tests.regime).axes[0].get_title()
+
+
+# ---- hysteresis test (issue 15) -------------------------------------------------------
+
+
+def _hysteresis_input(n=3000, seed=0):
+    rng = np.random.default_rng(seed)
+    return np.convolve(rng.normal(size=n), np.ones(20) / 20, mode="same") * 5
+
+
+def test_hysteresis_test_is_significant_on_a_hysteretic_residual():
+    from jaxcascade._diagnose import hysteresis_test, stop_outputs
+
+    u = _hysteresis_input()
+    e = stop_outputs(u, [0.3])[:, 0] + 0.1 * np.random.default_rng(1).normal(size=u.size)
+    test = hysteresis_test(u, e)
+    assert not test.passed and test.p_value < 1e-6
+    assert np.max(np.abs(test.values) - test.bounds) > 0  # a threshold outside its bound
+
+
+def test_hysteresis_test_passes_on_a_static_error_and_on_noise():
+    from jaxcascade._diagnose import hysteresis_test
+
+    u = _hysteresis_input(seed=2)
+    noise = 0.1 * np.random.default_rng(3).normal(size=u.size)
+    # A static error (a cubic of the input) is projected out: not hysteresis.
+    assert hysteresis_test(u, noise + 0.2 * u**3 / np.std(u) ** 3).passed
+    assert hysteresis_test(u, noise).passed
+
+
+def test_hysteresis_test_passes_on_a_cascade_record():
+    import jax
+
+    from jaxcascade._diagnose import residual_tests
+    from jaxcascade._effects import simulate_extended
+    from jaxcascade._testing import UNDECLARED, undeclared_record
+
+    model, _ = UNDECLARED[None]()
+    u, y = undeclared_record(model, jax.random.PRNGKey(4), 2000, 20.0)
+    residual = np.asarray(y - simulate_extended(model, u))
+    tests = residual_tests(np.asarray(u), residual)
+    assert tests.hysteresis.passed
+    assert "hysteresis" not in tests.failed
