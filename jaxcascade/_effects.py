@@ -44,6 +44,13 @@ class Effect(eqx.Module):
     # Levenberg-Marquardt steps of the joint refit; effects whose starts are already
     # least-squares fits on the residual need few.
     refine_steps: ClassVar[int] = 150
+    # Tried by the loop only when a test of its signature failed (the hysteresis
+    # effects: never on a record whose hysteresis test passes).
+    needs_signature: ClassVar[bool] = False
+    # A parallel path linear in its weights for a fixed structure: fitted by ridge least
+    # squares on the residual (`fit_records`), alternating with refits of the cascade
+    # (`_loop.fit_parallel`), not by a Levenberg-Marquardt refit of the extended model.
+    linear: ClassVar[bool] = False
 
     def input(self, u):
         return u

@@ -3,9 +3,20 @@
 Each is a path in parallel with the cascade (`Effect.parallel`: its force is added to
 the cascade's output) except `InputBacklash`, which acts on the input. Their residual
 signature is the `hysteresis` test of `_diagnose` (the residual depends on the direction
-of motion or on a stop operator of the input). Starting values are fitted by least
-squares on the current model's residual (host side); the loop then refines them with
-the cascade by output-error Levenberg-Marquardt.
+of motion or on a stop operator of the input), and the loop tries them only when that
+test failed (`Effect.needs_signature`).
+
+Fitting. `SlackFriction`, `PrandtlIshlinskii` and `DahlFriction` are linear in their
+weights once a structure is fixed (a threshold, a grid of thresholds, a rate): each
+structure of a small grid gives features of the input, the weights are a ridge
+least-squares fit to the current model's residual (`_hysteresis.ridge`), and the
+structure and the ridge parameter are chosen by leave-one-record-out cross-validation
+over the estimation records (first half / second half when there is one record; each
+record weighted by 1/length), never on the validation record (`fit_records`). The loop
+then alternates a refit of the cascade on the output minus the path with a new ridge fit
+(`_loop.fit_parallel`); no Levenberg-Marquardt refit of the extended model.
+`InputBacklash` is nonlinear: the loop refits it with the cascade by output-error
+Levenberg-Marquardt from the best gap of a grid.
 
 - `SlackFriction` (issue 15 (a)): friction behind a slack zone. A stop operator with
   threshold `r` (the slack half-width plus the elastic travel) feeds the static map
@@ -28,12 +39,13 @@ from __future__ import annotations
 import itertools
 from typing import ClassVar
 
+import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
 from ._effects import Effect, Start, _batched, _repeat
-from ._hysteresis import dahl, pi_basis, ridge, slack_map, stop_operator
+from ._hysteresis import dahl, pi_basis, ridge, slack_map, stop_operator, stop_operators
 
 _SIGNATURE = ("hysteresis",)
 
@@ -43,15 +55,85 @@ def _span(u) -> float:
     return float(np.quantile(u, 0.995) - np.quantile(u, 0.005)) or 1.0
 
 
-class SlackFriction(Effect):
+REGULARISATIONS = (1e-8, 1e-6, 1e-4, 1e-2)
+
+
+def _folds(records):
+    """Cross-validation folds: the records, or the two halves of a single record."""
+    if len(records) > 1:
+        return [tuple(np.asarray(a) for a in r) for r in records]
+    u, y, e = (np.asarray(a) for a in records[0])
+    h = len(u) // 2
+    return [(u[:h], y[:h], e[:h]), (u[h:], y[h:], e[h:])]
+
+
+def cross_validate(structures, features, records, regularisations=REGULARISATIONS):
+    """Choose a structure and a ridge parameter by leave-one-fold-out cross-validation
+    of a ridge fit to the residuals (`_folds`; each fold weighted by 1/length, its error
+    normalised by its residual variance), then fit the weights on every record.
+
+    **Arguments:** `structures`: a list of hashable structures; `features(structure,
+    u)`: the `T x P` features of the input `u`; `records`: `[(u, y, residual), ...]`.
+
+    **Returns:** `(structure, weights, table)`, `table` rows `(structure, ridge, error)`.
+    """
+    folds = _folds(records)
+    targets = [f[2] for f in folds]
+    w = [1.0 / len(t) for t in targets]
+    table = []
+    for structure in structures:
+        X = [features(structure, f[0]) for f in folds]
+        for lam in regularisations:
+            errors = []
+            for k in range(len(X)):
+                keep = [i for i in range(len(X)) if i != k]
+                theta = ridge(
+                    [X[i] for i in keep], [targets[i] for i in keep], [w[i] for i in keep], lam
+                )
+                errors.append(
+                    np.mean((targets[k] - X[k] @ theta) ** 2) / (np.var(targets[k]) or 1.0)
+                )
+            table.append((structure, lam, float(np.mean(errors))))
+    structure, lam, _ = min(table, key=lambda row: row[2])
+    X = [features(structure, np.asarray(r[0])) for r in records]
+    targets = [np.asarray(r[2]) for r in records]
+    theta = ridge(X, targets, [1.0 / len(t) for t in targets], lam)
+    return structure, theta, table
+
+
+class _LinearPath(Effect):
+    """A parallel path linear in its weights for a fixed structure (module docstring)."""
+
+    linear: ClassVar[bool] = True
+    needs_signature: ClassVar[bool] = True
+
+    @classmethod
+    def fit_records(cls, model, records) -> tuple[Effect, str]:
+        """The effect (unbatched) fitted to the residuals of `records`
+        `[(u, y, residual), ...]` (structure by cross-validation), and a label."""
+        raise NotImplementedError
+
+    @classmethod
+    def starts_records(cls, model, records):
+        effect, label = cls.fit_records(model, records)
+        batched = _batched(cls, **{k: [v] for k, v in effect.parameters().items()})
+        return [Start(label, model.orders, _repeat(model, 1), batched)]
+
+    @classmethod
+    def starts(cls, model, u, y, residual):
+        return cls.starts_records(model, [(u, y, residual)])
+
+
+class SlackFriction(_LinearPath):
     name: ClassVar[str] = "slack_friction"
     signature: ClassVar[tuple[str, ...]] = _SIGNATURE
     description: ClassVar[str] = (
         "friction behind a slack zone: stop operator (threshold r) then a dead zone "
         "(|s| <= dead r) and plateaus upper, lower"
     )
-    fractions: ClassVar[tuple[float, ...]] = (0.05, 0.1, 0.2, 0.35)
-    refine_steps: ClassVar[int] = 30
+    # Structures: thresholds (fractions of the input span) x dead-zone fractions.
+    fractions: ClassVar[tuple[float, ...]] = (0.02, 0.035, 0.05, 0.075, 0.1, 0.15, 0.2, 0.3)
+    deads: ClassVar[tuple[float, ...]] = (0.0, 0.2, 0.4, 0.6, 0.8)
 
     threshold: Float[Array, ""]
     dead: Float[Array, ""]
@@ -65,38 +147,28 @@ class SlackFriction(Effect):
         return slack_map(s, r, dead, self.upper, self.lower)
 
     @classmethod
-    def starts_records(cls, model, records):
-        span = _span(np.concatenate([r[0] for r in records]))
-        rows = []
-        for fraction, dead in itertools.product(cls.fractions, (0.3, 0.6)):
-            r = fraction * span
-            features, targets = [], []
-            for u, _, residual in records:
-                s = np.asarray(stop_operator(jnp.asarray(u), r))
-                up = np.clip((s / r - dead) / (1 - dead), 0, 1)
-                down = np.clip((-s / r - dead) / (1 - dead), 0, 1)
-                features.append(np.stack([up, down], 1))
-                targets.append(np.asarray(residual))
-            upper, lower = ridge(features, targets)
-            cost = sum(
-                float(np.sum((t - X @ [upper, lower]) ** 2))
-                for X, t in zip(features, targets, strict=True)
-            )
-            rows.append((cost, r, dead, upper, lower))
-        # The two best structures by least squares on the residual start the refit.
-        rows = sorted(rows)[:2]
-        columns = np.array(rows).T[1:]
-        effect = _batched(
-            cls, threshold=columns[0], dead=columns[1], upper=columns[2], lower=columns[3]
-        )
-        return [Start(cls.name, model.orders, _repeat(model, len(rows)), effect)]
+    def fit_records(cls, model, records):
+        span = _span(np.concatenate([np.asarray(r[0]) for r in records]))
+        radii = np.array(cls.fractions) * span
+        cache = {}
 
-    @classmethod
-    def starts(cls, model, u, y, residual):
-        return cls.starts_records(model, [(u, y, residual)])
+        def features(structure, u):
+            k, dead = structure
+            key = (id(u), len(u))
+            if key not in cache:
+                cache[key] = (u, np.asarray(stop_operators(jnp.asarray(u), radii)) / radii)
+            x = cache[key][1][:, k]
+            up = np.clip((x - dead) / (1 - dead), 0, 1)
+            down = np.clip((-x - dead) / (1 - dead), 0, 1)
+            return np.stack([up, down], 1)
+
+        structures = list(itertools.product(range(len(radii)), cls.deads))
+        (k, dead), (upper, lower), _ = cross_validate(structures, features, records)
+        effect = cls(*(jnp.asarray(float(v)) for v in (radii[k], dead, upper, lower)))
+        return effect, f"{cls.name}:r={cls.fractions[k]:g}span,dead={dead:g}"
 
 
-class PrandtlIshlinskii(Effect):
+class PrandtlIshlinskii(_LinearPath):
     name: ClassVar[str] = "prandtl_ishlinskii"
     signature: ClassVar[tuple[str, ...]] = _SIGNATURE
     description: ClassVar[str] = (
@@ -104,10 +176,8 @@ class PrandtlIshlinskii(Effect):
         "of each, linear in the weights"
     )
     fixed: ClassVar[tuple[str, ...]] = ("thresholds", "knots")
-    sizes: ClassVar[tuple[int, ...]] = (4, 8, 16)
-    regularisations: ClassVar[tuple[float, ...]] = (1e-6, 1e-4, 1e-2)
+    sizes: ClassVar[tuple[int, ...]] = (4, 8, 16, 24)
     knot_values: ClassVar[tuple[float, ...]] = (0.5, 0.9)
-    refine_steps: ClassVar[int] = 20
 
     thresholds: Float[Array, " K"]
     knots: Float[Array, " J"]
@@ -123,73 +193,42 @@ class PrandtlIshlinskii(Effect):
         return np.geomspace(0.01 * span, 0.5 * span, size)
 
     @classmethod
-    def _basis(cls, records, thresholds):
+    def _features(cls, u, thresholds):
         knots = jnp.asarray(cls.knot_values)
-        out = []
-        for u, _, _ in records:
-            X = np.asarray(pi_basis(jnp.asarray(u), jnp.asarray(thresholds), knots))
-            out.append(np.concatenate([X, np.ones((len(X), 1))], 1))
-        return out
+        X = np.asarray(pi_basis(jnp.asarray(u), jnp.asarray(thresholds), knots))
+        return np.concatenate([X, np.ones((len(X), 1))], 1)
 
     @classmethod
     def select(cls, records):
-        """Grid size and ridge parameter by cross-validation: leave one record out (each
-        record weighted by 1/length), or first half / second half for one record.
+        """Grid size and ridge parameter by cross-validation (`cross_validate`).
         Returns `(thresholds, weights, offset, cv_table)`."""
-        if len(records) == 1:
-            u, y, e = (np.asarray(a) for a in records[0])
-            h = len(u) // 2
-            folds_of = [(u[:h], y[:h], e[:h]), (u[h:], y[h:], e[h:])]
-        else:
-            folds_of = list(records)
         span = _span(np.concatenate([np.asarray(r[0]) for r in records]))
-        table = []
-        for size in cls.sizes:
-            thresholds = cls.grid(span, size)
-            X = cls._basis(folds_of, thresholds)
-            targets = [np.asarray(r[2]) for r in folds_of]
-            w = [1.0 / len(t) for t in targets]
-            for lam in cls.regularisations:
-                errors = []
-                for k in range(len(X)):
-                    keep = [i for i in range(len(X)) if i != k]
-                    theta = ridge(
-                        [X[i] for i in keep], [targets[i] for i in keep], [w[i] for i in keep], lam
-                    )
-                    errors.append(np.mean((targets[k] - X[k] @ theta) ** 2) / np.var(targets[k]))
-                table.append((size, lam, float(np.mean(errors))))
-        size, lam, _ = min(table, key=lambda row: row[2])
-        thresholds = cls.grid(span, size)
-        X = cls._basis(records, thresholds)
-        targets = [np.asarray(r[2]) for r in records]
-        theta = ridge(X, targets, [1.0 / len(t) for t in targets], lam)
-        return thresholds, theta[:-1], theta[-1], table
-
-    @classmethod
-    def starts_records(cls, model, records):
-        thresholds, weights, offset, _ = cls.select(records)
-        effect = _batched(
-            cls,
-            thresholds=[thresholds],
-            knots=[list(cls.knot_values)],
-            weights=[weights],
-            offset=[offset],
+        size, theta, table = cross_validate(
+            list(cls.sizes), lambda size, u: cls._features(u, cls.grid(span, size)), records
         )
-        return [Start(cls.name, model.orders, _repeat(model, 1), effect)]
+        return cls.grid(span, size), theta[:-1], theta[-1], table
 
     @classmethod
-    def starts(cls, model, u, y, residual):
-        return cls.starts_records(model, [(u, y, residual)])
+    def fit_records(cls, model, records):
+        thresholds, weights, offset, _ = cls.select(records)
+        effect = cls(
+            jnp.asarray(thresholds),
+            jnp.asarray(cls.knot_values),
+            jnp.asarray(weights),
+            jnp.asarray(float(offset)),
+        )
+        return effect, f"{cls.name}:K={len(thresholds)}"
 
 
-class DahlFriction(Effect):
+class DahlFriction(_LinearPath):
     name: ClassVar[str] = "dahl_friction"
     signature: ClassVar[tuple[str, ...]] = _SIGNATURE
     description: ClassVar[str] = (
         "Dahl friction: dF = sigma du (1 - F/level sgn du), in parallel with the cascade"
     )
-    fractions: ClassVar[tuple[float, ...]] = (0.02, 0.1, 0.3)
-    refine_steps: ClassVar[int] = 30
+    # A Dahl force is its level times a unit-level Dahl force of rate sigma / level: for
+    # a fixed rate it is linear in the level. Rates: 1 / (fraction of the input span).
+    fractions: ClassVar[tuple[float, ...]] = (0.01, 0.02, 0.05, 0.1, 0.2, 0.3)
 
     sigma: Float[Array, ""]
     level: Float[Array, ""]
@@ -200,27 +239,16 @@ class DahlFriction(Effect):
         return jnp.sign(self.level) * dahl(u, jnp.abs(self.sigma), level)
 
     @classmethod
-    def starts_records(cls, model, records):
-        span = _span(np.concatenate([r[0] for r in records]))
-        rows = []
-        for fraction in cls.fractions:
-            # A unit-level Dahl force reaches 63% of its level after a travel 1/sigma;
-            # the level then enters linearly.
-            sigma = 1.0 / (fraction * span)
-            X = [np.asarray(dahl(jnp.asarray(u), sigma, 1.0))[:, None] for u, _, _ in records]
-            targets = [np.asarray(r[2]) for r in records]
-            (level,) = ridge(X, targets)
-            cost = sum(
-                float(np.sum((t - level * x[:, 0]) ** 2)) for x, t in zip(X, targets, strict=True)
-            )
-            rows.append((cost, sigma, level))
-        rows = sorted(rows)[:1]
-        effect = _batched(cls, sigma=[r[1] for r in rows], level=[r[2] for r in rows])
-        return [Start(cls.name, model.orders, _repeat(model, len(rows)), effect)]
+    def fit_records(cls, model, records):
+        span = _span(np.concatenate([np.asarray(r[0]) for r in records]))
 
-    @classmethod
-    def starts(cls, model, u, y, residual):
-        return cls.starts_records(model, [(u, y, residual)])
+        def features(fraction, u):
+            return np.asarray(dahl(jnp.asarray(u), 1.0 / (fraction * span), 1.0))[:, None]
+
+        fraction, (level,), _ = cross_validate(list(cls.fractions), features, records)
+        rate = 1.0 / (fraction * span)
+        effect = cls(jnp.asarray(rate * abs(float(level))), jnp.asarray(float(level)))
+        return effect, f"{cls.name}:travel={fraction:g}span"
 
 
 class InputBacklash(Effect):
@@ -231,6 +259,7 @@ class InputBacklash(Effect):
     )
     fractions: ClassVar[tuple[float, ...]] = (0.02, 0.05, 0.1, 0.2)
     refine_steps: ClassVar[int] = 30
+    needs_signature: ClassVar[bool] = True
 
     gap: Float[Array, ""]
 
@@ -238,8 +267,26 @@ class InputBacklash(Effect):
         return u - stop_operator(u, jnp.abs(self.gap))
 
     @classmethod
+    def starts_records(cls, model, records):
+        """One start: the gap of the grid whose model (the current cascade, not refitted)
+        has the smallest squared error on the records."""
+        from ._effects import ExtendedModel, simulate_extended
+
+        simulate = eqx.filter_jit(simulate_extended)
+        span = _span(np.concatenate([np.asarray(r[0]) for r in records]))
+        costs = []
+        for fraction in cls.fractions:
+            effect = cls(jnp.asarray(fraction * span))
+            extended = ExtendedModel(model.params, (*model.effects, effect), model.noise)
+            costs.append(
+                sum(
+                    float(np.sum((np.asarray(y) - simulate(extended, jnp.asarray(u))) ** 2))
+                    for u, y, _ in records
+                )
+            )
+        gap = cls.fractions[int(np.nanargmin(costs))] * span
+        return [Start(cls.name, model.orders, _repeat(model, 1), _batched(cls, gap=[gap]))]
+
+    @classmethod
     def starts(cls, model, u, y, residual):
-        span = _span(u)
-        gaps = [fraction * span for fraction in cls.fractions]
-        effect = _batched(cls, gap=gaps)
-        return [Start(cls.name, model.orders, _repeat(model, len(gaps)), effect)]
+        return cls.starts_records(model, [(u, y, residual)])

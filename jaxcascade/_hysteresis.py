@@ -26,6 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 
 
+@jax.jit
 def stop_operators(u, thresholds):
     """Stop operators of `u` for each threshold.
 
@@ -54,6 +55,7 @@ def play_operator(u, threshold):
     return u - stop_operator(u, threshold) - u[0]
 
 
+@jax.jit
 def pi_basis(u, thresholds, knots):
     """The Prandtl-Ishlinskii basis: for each threshold `r_k`, `s_k / r_k` and the hinges
     `max(s_k / r_k - c, 0)`, `max(-s_k / r_k - c, 0)` for `c` in `knots` (in `[0, 1)`).
@@ -77,6 +79,7 @@ def slack_map(s, r, dead, upper, lower, stiffness_ratio=None):
     return upper * ramp_up + lower * ramp_down
 
 
+@jax.jit
 def dahl(u, sigma, level):
     """Dahl friction force (module docstring); `level = Fc > 0`."""
     du = jnp.diff(u, prepend=u[:1])
@@ -90,6 +93,7 @@ def dahl(u, sigma, level):
     return out
 
 
+@jax.jit
 def lugre(u, dt, sigma0, sigma1, sigma2, fc_pos, fc_neg, fs_pos, fs_neg, vs):
     """LuGre friction force (module docstring) for the displacement `u`, sample period
     `dt`; velocity by the backward difference."""

@@ -5,7 +5,14 @@
 3. If every test passes, stop: nothing is invented.
 4. Otherwise refit the model with each effect of the library added (`_effects`), from
    the current estimate, and score each on the validation record: its NRMSE, and a
-   paired test that its squared errors are smaller than the current model's.
+   paired test that its squared errors are smaller than the current model's. An effect
+   marked `needs_signature` (the hysteresis effects) is tried only when a test of its
+   signature failed: never on a record whose hysteresis test passes. A parallel path
+   linear in its weights (`Effect.linear`) is fitted by ridge least squares on the
+   residual, alternating with refits of the cascade (`fit_parallel`); the others by an
+   output-error Levenberg-Marquardt refit of the extended model (`refit`). When the
+   hysteresis test failed, those linear hysteresis paths are tried first, and the rest
+   of the library only if none of them is significant.
 5. Among the significant candidates, those whose residual signature matches a failed
    test rank first, then by validation NRMSE; the best is added. A coloured residual
    that no deterministic effect explains, with the input tests passing, gets the
@@ -33,6 +40,10 @@ from ._model import CascadeParams, Orders
 from ._noise import ARNoise
 from ._simulate import backlash_switches, shift
 from ._validate import record
+
+# Compiled once per model structure and record length (the loop simulates the same
+# models on the same records many times).
+_simulate = eqx.filter_jit(simulate_with_switches)
 
 
 def _records(u, y):
@@ -95,6 +106,39 @@ def refit(model: ExtendedModel, start: Start, u, y, max_steps: int = 150):
     return chosen, float(costs[best]), int(np.asarray(status)[best])
 
 
+def fit_parallel(model: ExtendedModel, effect_class, u, y, alternations: int = 2):
+    """Add a parallel path linear in its weights (`Effect.linear`) to `model`: its
+    weights by ridge least squares on the residual of the current model (structure by
+    cross-validation over the records, `effect_class.fit_records`), then `alternations`
+    times a refit of the model (cascade and earlier effects) on the output minus the
+    path, and a new ridge fit on the new residual. `u`, `y`: one record or sequences of
+    records. Returns `(model, cost, label)`, `cost` the mean squared error over the
+    records."""
+    us, ys = _records(u, y)
+    dtype = jnp.asarray(us[0]).dtype
+    us = tuple(jnp.asarray(v, dtype) for v in us)
+    ys = tuple(jnp.asarray(v, dtype) for v in ys)
+    current = model
+
+    def residuals(current):
+        return [
+            (np.asarray(v), np.asarray(w), np.asarray(w - _simulate(current, v)[0]))
+            for v, w in zip(us, ys, strict=True)
+        ]
+
+    effect, label = effect_class.fit_records(current, residuals(current))
+    for _ in range(alternations):
+        targets = tuple(w - effect.parallel(v) for v, w in zip(us, ys, strict=True))
+        refitted, _, _ = refit(current, _no_effect(current.params), us, targets)
+        current = ExtendedModel(refitted.params, refitted.effects[:-1], refitted.noise)
+        effect, label = effect_class.fit_records(current, residuals(current))
+    final = ExtendedModel(current.params, (*current.effects, effect), current.noise)
+    errors = np.concatenate(
+        [np.asarray(w - _simulate(final, v)[0]) for v, w in zip(us, ys, strict=True)]
+    )
+    return final, float(np.mean(errors**2)), label
+
+
 def model_standard_errors(model: ExtendedModel, u, y) -> dict[str, float]:
     """Estimated standard errors of every estimated parameter of `model` on the record
     `(u, y)`: the cascade's (`Orders.names`) and each effect's free parameters
@@ -138,7 +182,7 @@ class Evaluation:
 def evaluate(
     model: ExtendedModel, u, y, sample_period: float = 1.0, window: tuple[int, int] | None = None
 ) -> Evaluation:
-    y_sim, x, y_cascade = (np.asarray(a) for a in simulate_with_switches(model, jnp.asarray(u)))
+    y_sim, x, y_cascade = (np.asarray(a) for a in _simulate(model, jnp.asarray(u)))
     y = np.asarray(y)
     residual = y - y_sim
     p = model.params
@@ -303,39 +347,42 @@ def model_error_loop(
         failed = set(current.tests.failed)
         say(f"round {round_}: failed tests {sorted(failed)}; error {current.error:.4g}")
         records = [
-            (np.asarray(u), np.asarray(y), np.asarray(y - simulate_with_switches(model, u)[0]))
+            (np.asarray(u), np.asarray(y), np.asarray(y - _simulate(model, u)[0]))
             for u, y in zip(us, ys, strict=True)
         ]
         round_candidates = []
-        for name in names:
-            if name in added or name not in EFFECTS:
-                continue
-            effect = EFFECTS[name]
-            best = None
-            for start in effect.starts_records(model, records):
-                fitted, cost, status = refit(model, start, us, ys, effect.refine_steps)
-                if best is None or cost < best[1]:
-                    best = (fitted, cost, start.label)
-            fitted, _, label = best
-            evaluation = assess(fitted)
-            t = paired_improvement(current.residual, evaluation.residual)
-            gain = 1 - evaluation.error / current.error
-            candidate = Candidate(
-                round_,
-                name,
-                label,
-                evaluation.error,
-                t,
-                bool(t > t_threshold and gain > min_gain),
-                bool(failed & set(effect.signature)),
-                fitted,
-                evaluation,
-            )
-            say(
-                f"  {label:<24} error {evaluation.error:.4g}  t {t:7.2f}  "
-                f"{'significant' if candidate.significant else ''}"
-            )
-            round_candidates.append(candidate)
+        # The failed hysteresis test points to the hysteresis paths linear in their
+        # weights (cheap ridge fits): they are tried first, and the rest of the library
+        # only when none of them is significant.
+        tried = [n for n in names if n not in added and n in EFFECTS]
+        tried = [
+            n for n in tried if not EFFECTS[n].needs_signature or failed & set(EFFECTS[n].signature)
+        ]
+        first = [n for n in tried if EFFECTS[n].needs_signature and EFFECTS[n].linear]
+        for tier in (first, [n for n in tried if n not in first]):
+            if any(c.significant for c in round_candidates):
+                break
+            for name in tier:
+                round_candidates.append(
+                    _candidate(
+                        name,
+                        model,
+                        current,
+                        failed,
+                        round_,
+                        us,
+                        ys,
+                        records,
+                        assess,
+                        t_threshold=t_threshold,
+                        min_gain=min_gain,
+                    )
+                )
+                c = round_candidates[-1]
+                say(
+                    f"  {c.label:<24} error {c.error:.4g}  t {c.t:7.2f}  "
+                    f"{'significant' if c.significant else ''}"
+                )
         if ARNoise.name in names and ARNoise.name not in added:
             noise, p_value = ARNoise.fit(current.residual)
             noise_model = ExtendedModel(model.params, model.effects, noise)
@@ -378,6 +425,35 @@ def model_error_loop(
         model, current = chosen.model, chosen.evaluation
         steps.append((f"+ {chosen.label}", model, current))
     return LoopResult(before, current, plain(base), model, added, candidates, steps)
+
+
+def _candidate(name, model, current, failed, round_, us, ys, records, assess, **options):
+    """Fit the effect `name` added to `model` and score it on the validation record."""
+    t_threshold, min_gain = options.get("t_threshold", 3.0), options.get("min_gain", 0.02)
+    effect = EFFECTS[name]
+    if effect.linear:
+        fitted, _, label = fit_parallel(model, effect, us, ys)
+    else:
+        best = None
+        for start in effect.starts_records(model, records):
+            fitted, cost, _ = refit(model, start, us, ys, effect.refine_steps)
+            if best is None or cost < best[1]:
+                best = (fitted, cost, start.label)
+        fitted, _, label = best
+    evaluation = assess(fitted)
+    t = paired_improvement(current.residual, evaluation.residual)
+    gain = 1 - evaluation.error / current.error
+    return Candidate(
+        round_,
+        name,
+        label,
+        evaluation.error,
+        t,
+        bool(t > t_threshold and gain > min_gain),
+        bool(failed & set(effect.signature)),
+        fitted,
+        evaluation,
+    )
 
 
 def _no_effect(params: CascadeParams) -> Start:
