@@ -106,7 +106,7 @@ def refit(model: ExtendedModel, start: Start, u, y, max_steps: int = 150):
     return chosen, float(costs[best]), int(np.asarray(status)[best])
 
 
-def fit_parallel(model: ExtendedModel, effect_class, u, y, alternations: int = 2):
+def fit_parallel(model: ExtendedModel, effect_class, u, y, alternations: int = 1):
     """Add a parallel path linear in its weights (`Effect.linear`) to `model`: its
     weights by ridge least squares on the residual of the current model (structure by
     cross-validation over the records, `effect_class.fit_records`), then `alternations`
