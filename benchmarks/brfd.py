@@ -20,6 +20,7 @@ import argparse
 import json
 import pathlib
 import sys
+import time
 
 WINDOWS = {"imperialvalley": (3072, 7680), "kocaeli": (6144, 14336)}
 FILES = {
@@ -94,9 +95,11 @@ def main(argv=None) -> int:
     data, out = pathlib.Path(args.data), pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     rows = []
+    times = {}
     for run, train, valid in runs(data):
         if args.only and args.only not in run:
             continue
+        started = time.perf_counter()
         window = WINDOWS[valid]
         report = out / run
         argv = ["loop", *map(str, train), "--validate", str(data / FILES[valid])]
@@ -130,6 +133,7 @@ def main(argv=None) -> int:
             }
         )
         rows.append(lugre_row(train, data / FILES[valid], window, args.decimate, run, valid))
+        times[run] = time.perf_counter() - started
         for name, value in PUBLISHED[valid].items():
             rows.append(
                 {
@@ -153,7 +157,12 @@ def main(argv=None) -> int:
         "# Friction damper (BRFD): model-error loop, window and full-record NRMSE",
         "",
         f"Command: `python benchmarks/brfd.py --data {args.data} --out {args.out} "
-        f"--decimate {args.decimate} --max-effects {args.max_effects}`",
+        f"--decimate {args.decimate} --max-effects {args.max_effects}"
+        + (f" --only {args.only}" if args.only else "")
+        + "`",
+        "",
+        "Wall time of each run (loop, ARX and LuGre peers): "
+        + ", ".join(f"{run} {seconds:.0f} s" for run, seconds in times.items()),
         "",
         "Estimation: the 30 lb harmonic tests (characterization/index.csv) plus the earthquake "
         "named, each record simulated from rest; the loop chooses among its candidates on the "
