@@ -82,6 +82,11 @@ def main(argv=None) -> int:
     parser.add_argument("--decimate", type=int, default=16)
     parser.add_argument("--max-effects", type=int, default=2)
     parser.add_argument("--only", default=None, help="run only the runs whose name holds this")
+    parser.add_argument(
+        "--effects",
+        default=None,
+        help="NAME,NAME: effects the loop considers (jaxcascade loop --effects; default all)",
+    )
     args = parser.parse_args(argv)
 
     import jax
@@ -106,6 +111,8 @@ def main(argv=None) -> int:
         argv += ["--input", "displacement_in", "--output", "force_kip", "--time", "time_s"]
         argv += ["--decimate", str(args.decimate), "--window", f"{window[0]}:{window[1]}"]
         argv += ["--max-effects", str(args.max_effects), "--json", "--report", str(report)]
+        if args.effects:
+            argv += ["--effects", args.effects]
         print(f"{run}: jaxcascade {' '.join(argv)}", file=sys.stderr, flush=True)
         if cli(argv) != 0:
             raise SystemExit(f"{run}: the loop failed")
@@ -120,6 +127,19 @@ def main(argv=None) -> int:
                     "nrmse": step["error"],
                     "window_nrmse": step["window_error"],
                     "effects": ",".join(added[:i]),
+                }
+            )
+        for c in full["candidates"]:
+            verdict = "added" if c["name"] in added else "not added"
+            rows.append(
+                {
+                    "run": run,
+                    "validation": valid,
+                    "model": f"candidate (round {c['round']}, t {c['t']:.2f}, {verdict}): "
+                    + c["variant"],
+                    "nrmse": c["error"],
+                    "window_nrmse": c.get("window_error"),
+                    "effects": ",".join(added[: c["round"] - 1]),
                 }
             )
         rows.append(
@@ -159,6 +179,7 @@ def main(argv=None) -> int:
         f"Command: `python benchmarks/brfd.py --data {args.data} --out {args.out} "
         f"--decimate {args.decimate} --max-effects {args.max_effects}"
         + (f" --only {args.only}" if args.only else "")
+        + (f" --effects {args.effects}" if args.effects else "")
         + "`",
         "",
         "Wall time of each run (loop, ARX and LuGre peers): "

@@ -203,10 +203,28 @@ class PrandtlIshlinskii(_LinearPath):
         """Grid size and ridge parameter by cross-validation (`cross_validate`).
         Returns `(thresholds, weights, offset, cv_table)`."""
         span = _span(np.concatenate([np.asarray(r[0]) for r in records]))
-        size, theta, table = cross_validate(
-            list(cls.sizes), lambda size, u: cls._features(u, cls.grid(span, size)), records
-        )
-        return cls.grid(span, size), theta[:-1], theta[-1], table
+        grids = {size: cls.grid(span, size) for size in cls.sizes}
+        every = np.concatenate(list(grids.values()))
+        columns, at = {}, 0
+        for size in cls.sizes:
+            columns[size] = slice(at, at + size)
+            at += size
+        knots = np.asarray(cls.knot_values)
+        cache = {}
+
+        def features(size, u):
+            # The stop operators of every grid at once, one scan per record (`pi_basis`
+            # in NumPy from them).
+            key = (id(u), len(u))
+            if key not in cache:
+                cache[key] = (u, np.asarray(stop_operators(jnp.asarray(u), every)) / every)
+            x = cache[key][1][:, columns[size]]
+            up = np.maximum(x[:, :, None] - knots, 0.0).reshape(len(x), -1)
+            down = np.maximum(-x[:, :, None] - knots, 0.0).reshape(len(x), -1)
+            return np.concatenate([x, up, down, np.ones((len(x), 1))], 1)
+
+        size, theta, table = cross_validate(list(cls.sizes), features, records)
+        return grids[size], theta[:-1], theta[-1], table
 
     @classmethod
     def fit_records(cls, model, records):

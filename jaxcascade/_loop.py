@@ -232,6 +232,7 @@ class Candidate:
             "t": self.t,
             "significant": self.significant,
             "signature_match": self.signature_match,
+            "window_error": None if self.evaluation is None else self.evaluation.window_error,
         }
 
 

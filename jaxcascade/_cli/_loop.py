@@ -153,6 +153,7 @@ def run_loop(args) -> int:
         sample_period=validation.sample_period or 1.0,
         window=window,
         progress=say,
+        effects=_effects(args.effects),
     )
     full = result.to_dict()
     # The ARX peer is fitted on the estimation records joined end to end.
@@ -208,6 +209,21 @@ def run_loop(args) -> int:
     return 0
 
 
+def _effects(text: str | None) -> tuple[str, ...] | None:
+    """`--effects a,b`: names of the library (and the noise model) the loop considers."""
+    if text is None:
+        return None
+    from .._effects import EFFECTS
+    from .._noise import ARNoise
+
+    names = tuple(name.strip() for name in text.split(",") if name.strip())
+    unknown = [name for name in names if name not in {*EFFECTS, ARNoise.name}]
+    if unknown or not names:
+        known = ", ".join([*EFFECTS, ARNoise.name])
+        raise CLIError(f"--effects: unknown effect(s) {unknown or text!r}; known: {known}.")
+    return names
+
+
 def add_parser(subparsers) -> None:
     parser = subparsers.add_parser(
         "loop",
@@ -235,6 +251,11 @@ def add_parser(subparsers) -> None:
         default=None,
         help="START:STOP: also score the validation record on these samples of the file "
         "as stored (before decimation)",
+    )
+    parser.add_argument(
+        "--effects",
+        default=None,
+        help="NAME,NAME: the effects of the library the loop considers (default: all)",
     )
     parser.add_argument("--report", default=None, help="folder for the report and figures")
     parser.add_argument("--json", action="store_true", help="print the JSON summary")
