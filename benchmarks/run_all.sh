@@ -35,7 +35,8 @@ sweeps() {  # issue 3: SNR x N sweeps of both paper examples, 500 realisations p
 }
 loop() {  # issue 5: undeclared effects, and the measured friction-damper records
     python benchmarks/effects_loop.py --out results/effects_loop
-    python benchmarks/brfd.py --data "${BRFD_DATA:-../shared/data/brfd}" --out results/brfd --decimate 16 --max-effects 1
+    python benchmarks/brfd.py --data "${BRFD_DATA:-../shared/data/brfd}" --out results/brfd --decimate 16 \
+        --max-effects 1 --only harmonics+ --effects slack_friction,prandtl_ishlinskii,dahl_friction,colored_noise
 }
 reproduce() {  # issue 2: the paper's examples
     for ex in 1 2; do for snr in 25 inf; do for est in literal robust; do

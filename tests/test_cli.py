@@ -167,3 +167,15 @@ def test_loop_on_several_records_with_a_window(capsys, tmp_path):
     argv[argv.index("100:400")] = "100:4000"
     assert main(argv) == 2
     assert "--window" in capsys.readouterr().err
+
+
+def test_loop_effects_option_names_the_library(capsys, tmp_path):
+    # An unknown name is one line, exit 2, before any fitting.
+    rng = np.random.default_rng(0)
+    path = tmp_path / "r.csv"
+    pd.DataFrame({"u": rng.normal(size=300), "y": rng.normal(size=300)}).to_csv(path, index=False)
+    argv = ["loop", str(path), "--validate", str(path), "--input", "u", "--output", "y"]
+    argv += ["--effects", "output_offset,no_such_effect", "--quiet"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "--effects" in err and "no_such_effect" in err
