@@ -10,9 +10,7 @@
    signature failed: never on a record whose hysteresis test passes. A parallel path
    linear in its weights (`Effect.linear`) is fitted by ridge least squares on the
    residual, alternating with refits of the cascade (`fit_parallel`); the others by an
-   output-error Levenberg-Marquardt refit of the extended model (`refit`). When the
-   hysteresis test failed, those linear hysteresis paths are tried first, and the rest
-   of the library only if none of them is significant.
+   output-error Levenberg-Marquardt refit of the extended model (`refit`).
 5. Among the significant candidates, those whose residual signature matches a failed
    test rank first, then by validation NRMSE; the best is added. A coloured residual
    that no deterministic effect explains, with the input tests passing, gets the
@@ -352,38 +350,31 @@ def model_error_loop(
             for u, y in zip(us, ys, strict=True)
         ]
         round_candidates = []
-        # The failed hysteresis test points to the hysteresis paths linear in their
-        # weights (cheap ridge fits): they are tried first, and the rest of the library
-        # only when none of them is significant.
+        # Effects marked `needs_signature` (the hysteresis effects) only when a test of
+        # their signature failed.
         tried = [n for n in names if n not in added and n in EFFECTS]
         tried = [
             n for n in tried if not EFFECTS[n].needs_signature or failed & set(EFFECTS[n].signature)
         ]
-        first = [n for n in tried if EFFECTS[n].needs_signature and EFFECTS[n].linear]
-        for tier in (first, [n for n in tried if n not in first]):
-            if any(c.significant for c in round_candidates):
-                break
-            for name in tier:
-                round_candidates.append(
-                    _candidate(
-                        name,
-                        model,
-                        current,
-                        failed,
-                        round_,
-                        us,
-                        ys,
-                        records,
-                        assess,
-                        t_threshold=t_threshold,
-                        min_gain=min_gain,
-                    )
-                )
-                c = round_candidates[-1]
-                say(
-                    f"  {c.label:<24} error {c.error:.4g}  t {c.t:7.2f}  "
-                    f"{'significant' if c.significant else ''}"
-                )
+        for name in tried:
+            c = _candidate(
+                name,
+                model,
+                current,
+                failed,
+                round_,
+                us,
+                ys,
+                records,
+                assess,
+                t_threshold=t_threshold,
+                min_gain=min_gain,
+            )
+            round_candidates.append(c)
+            say(
+                f"  {c.label:<24} error {c.error:.4g}  t {c.t:7.2f}  "
+                f"{'significant' if c.significant else ''}"
+            )
         if ARNoise.name in names and ARNoise.name not in added:
             noise, p_value = ARNoise.fit(current.residual)
             noise_model = ExtendedModel(model.params, model.effects, noise)
