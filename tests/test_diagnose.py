@@ -59,7 +59,7 @@ def test_white_noise_false_alarm_rate(input_kind):
             rejections[name] = rejections.get(name, 0) + (not passed)
         if seed < 5:  # and a few lags outside the pointwise bound are normal
             assert tests.autocorrelation.bound == pytest.approx(1.96 / np.sqrt(N))
-    assert len(rejections) == 14
+    assert len(rejections) == 15  # eleven tests (hysteresis included) and four verdicts
     too_many = {name: count for name, count in rejections.items() if count > limit}
     assert not too_many, f"more than {limit:.0f} of {seeds} white records rejected: {too_many}"
 
@@ -181,7 +181,7 @@ def test_figures(tmp_path):
     tests = residual_tests(u, e, regime, sample_period=1 / 128)
     paths = save_residual_figures(tests, tmp_path)
     expected = {"overview", "autocorrelation", "spectrum", "cross_correlation", "e_eu"}
-    expected |= {"u2_e", "u2_e2", "regime", "level", "time"}
+    expected |= {"u2_e", "u2_e2", "regime", "level", "time", "hysteresis"}
     assert {p.stem.removeprefix("residual_") for p in paths} == expected
     assert all(p.stat().st_size > 5000 for p in paths)
     figure = plot_correlation(tests.u2_e)
