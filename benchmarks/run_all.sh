@@ -48,7 +48,8 @@ efficiency() {  # issue 13: literal and robust against the Cramer-Rao bound
 }
 loop() {  # issue 5: undeclared effects, and the measured friction-damper records
     python benchmarks/effects_loop.py --out results/effects_loop
-    bash benchmarks/brfd_loop.sh
+    python benchmarks/brfd.py --data "${BRFD_DATA:-../shared/data/brfd}" --out results/brfd --decimate 16 \
+        --max-effects 1 --only harmonics+ --effects slack_friction,prandtl_ishlinskii,dahl_friction,colored_noise
 }
 reproduce() {  # issue 2: the paper's examples
     for ex in 1 2; do for snr in 25 inf; do for est in literal robust; do

@@ -173,9 +173,117 @@ class SpectrumTest(_Serialisable):
     passed: bool
 
 
+@dataclasses.dataclass(frozen=True, eq=False)
+class HysteresisTest(_Serialisable):
+    """Does the residual depend on the input's history beyond its present value?
+
+    - `direction`: residual means (cubic in the input projected out, as below) when the
+      input increases and when it decreases (a
+      `GroupTest`; a sample with zero increment keeps the last direction).
+    - Stop-operator test: for each threshold `thresholds[k]` (a grid of fractions of the
+      input span), the partial correlation `values[k]` of the residual with the stop
+      operator's output, both with a cubic polynomial of the input projected out (so a
+      static error is not read as hysteresis), and its t statistic with a Newey-West
+      standard error; `bounds[k]` is the simultaneous `1 - alpha/2` bound on the
+      correlation (Bonferroni over thresholds), `p_stop` the smallest p-value times the
+      number of thresholds.
+    - `p_value = min(1, 2 min(p_stop, direction.p_value))`.
+    """
+
+    name: str
+    direction: GroupTest
+    thresholds: np.ndarray
+    values: np.ndarray
+    t: np.ndarray
+    bounds: np.ndarray
+    p_stop: float
+    p_value: float
+    passed: bool
+
+
+def stop_outputs(u, thresholds) -> np.ndarray:
+    """Stop operators of `u` (`_hysteresis.stop_operators` in NumPy): `(N, K)`."""
+    u = np.asarray(u, dtype=np.float64)
+    thresholds = np.asarray(thresholds, dtype=np.float64)
+    out = np.empty((u.size, thresholds.size))
+    state = np.zeros(thresholds.size)
+    du = np.diff(u, prepend=u[:1])
+    for t in range(u.size):
+        state = np.minimum(np.maximum(state + du[t], -thresholds), thresholds)
+        out[t] = state
+    return out
+
+
+def hysteresis_test(
+    u, e, n_thresholds: int = 12, alpha: float = 0.05, hac_lags: int | None = None
+) -> HysteresisTest:
+    """The residual against the direction of motion and against stop operators of the
+    input (`HysteresisTest`)."""
+    u = np.asarray(u, dtype=np.float64)
+    e = np.asarray(e, dtype=np.float64)
+    n = e.size
+    lags = hac_lags or _hac_lags(n)
+    du = np.diff(u, prepend=u[:1])
+    moving = np.flatnonzero(du != 0)
+    last = np.maximum.accumulate(np.where(du != 0, np.arange(n), -1))
+    rising = np.where(
+        last >= 0, du[np.maximum(last, 0)] > 0, du[moving[0]] > 0 if moving.size else True
+    )
+    span = float(np.quantile(u, 0.995) - np.quantile(u, 0.005)) or 1.0
+    thresholds = np.geomspace(0.01 * span, 0.5 * span, n_thresholds)
+    z = stop_outputs(u, thresholds)
+    scale = np.std(u) or 1.0
+    basis = np.stack([np.ones(n)] + [(u / scale) ** k for k in (1, 2, 3)], 1)
+    q, _ = np.linalg.qr(basis)
+    e_part = e - q @ (q.T @ e)
+    z_part = z - q @ (q.T @ z)
+    direction = group_test(
+        "direction",
+        e_part,
+        np.where(rising, 0, 1),
+        ("increasing", "decreasing"),
+        [1.0, -1.0],
+        alpha,
+        lags,
+    )
+    values = np.zeros(n_thresholds)
+    t = np.zeros(n_thresholds)
+    scales = np.full(n_thresholds, np.inf)  # standard error of each correlation
+    for k in range(n_thresholds):
+        zk = z_part[:, k]
+        denominator = math.sqrt(float(zk @ zk) * float(e_part @ e_part))
+        product = zk * e_part
+        if denominator <= 0 or not np.any(product):
+            continue
+        values[k] = float(np.sum(product)) / denominator
+        # Newey-West variance of sum z e: the residual and the operator are both smooth.
+        variance = _long_run_factor(product - product.mean(), lags) * float(
+            np.sum((product - product.mean()) ** 2)
+        )
+        scales[k] = math.sqrt(variance) / denominator
+        t[k] = values[k] / scales[k]
+    p_each = 2.0 * scipy.stats.norm.sf(np.abs(t))
+    p_stop = min(1.0, n_thresholds * float(np.min(p_each)))
+    critical = scipy.stats.norm.isf(alpha / (4.0 * n_thresholds))
+    bounds = critical * scales
+    p_value = min(1.0, 2.0 * min(p_stop, direction.p_value))
+    return HysteresisTest(
+        name="hysteresis",
+        direction=direction,
+        thresholds=thresholds,
+        values=values,
+        t=t,
+        bounds=bounds,
+        p_stop=float(p_stop),
+        p_value=float(p_value),
+        passed=bool(p_value >= alpha),
+    )
+
+
 _WHITENESS = ("autocorrelation", "spectrum")
 _INDEPENDENCE = ("cross_correlation", "e_eu", "u2_e", "u2_e2")
 _CONDITIONAL = ("mean", "regime", "level", "time")
+_HYSTERESIS = ("hysteresis",)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -204,10 +312,11 @@ class ResidualTests(_Serialisable):
     regime: GroupTest | None
     level: GroupTest
     time: DriftTest
+    hysteresis: HysteresisTest | None = None
 
     def tests(self) -> dict[str, Any]:
         """Every test present, by name."""
-        names = _WHITENESS + _INDEPENDENCE + _CONDITIONAL
+        names = _WHITENESS + _INDEPENDENCE + _CONDITIONAL + _HYSTERESIS
         return {name: getattr(self, name) for name in names if getattr(self, name) is not None}
 
     def _group_ok(self, names) -> bool:
@@ -579,6 +688,7 @@ def residual_tests(
     n_blocks: int = 10,
     sample_period: float = 1.0,
     hac_lags: int | None = None,
+    hysteresis: bool = True,
 ) -> ResidualTests:
     """Every residual test of a fitted model on one validation record.
 
@@ -589,7 +699,8 @@ def residual_tests(
       right (g2), e.g. `regime_from_switches(g1, g2)` of the simulated backlash.
     - `max_lag`: lags of the correlation tests; `alpha`: level of each test;
       `n_bins`: input-level bins; `n_blocks`: time blocks; `sample_period`: for the
-      spectrum's frequency axis; `hac_lags`: Newey-West lags (default `4 (N/100)^(2/9)`).
+      spectrum's frequency axis; `hac_lags`: Newey-West lags (default `4 (N/100)^(2/9)`);
+      `hysteresis`: also run `hysteresis_test`.
     """
     u = np.asarray(u, dtype=np.float64)
     e = np.asarray(e, dtype=np.float64)
@@ -639,4 +750,5 @@ def residual_tests(
         regime=None if regime is None else regime_test(e, regime, alpha, hac_lags),
         level=level_test(u, e, n_bins, alpha, hac_lags),
         time=drift_test(e, n_blocks, alpha, hac_lags),
+        hysteresis=hysteresis_test(u, e, alpha=alpha, hac_lags=hac_lags) if hysteresis else None,
     )

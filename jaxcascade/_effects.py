@@ -41,12 +41,27 @@ class Effect(eqx.Module):
     signature: ClassVar[tuple[str, ...]] = ()
     description: ClassVar[str] = ""
     fixed: ClassVar[tuple[str, ...]] = ()
+    # Levenberg-Marquardt steps of the joint refit; effects whose starts are already
+    # least-squares fits on the residual need few.
+    refine_steps: ClassVar[int] = 150
+    # Tried by the loop only when a test of its signature failed (the hysteresis
+    # effects: never on a record whose hysteresis test passes).
+    needs_signature: ClassVar[bool] = False
+    # A parallel path linear in its weights for a fixed structure: fitted by ridge least
+    # squares on the residual (`fit_records`), alternating with refits of the cascade
+    # (`_loop.fit_parallel`), not by a Levenberg-Marquardt refit of the extended model.
+    linear: ClassVar[bool] = False
 
     def input(self, u):
         return u
 
     def output(self, y, x):
         return y
+
+    def parallel(self, u):
+        """A path in parallel with the cascade: its output, added to the model's output,
+        from the model's input `u`; `None` (the default) for an effect without one."""
+        return None
 
     def free_filter(self):
         """`eqx.partition` filter: True for the parameters refined with the cascade."""
@@ -70,6 +85,13 @@ class Effect(eqx.Module):
     def starts(cls, model: ExtendedModel, u, y, residual) -> list[Start]:
         """Candidate starts for adding this effect to `model` (host side, numpy)."""
         raise NotImplementedError
+
+    @classmethod
+    def starts_records(cls, model: ExtendedModel, records) -> list[Start]:
+        """Starts from several estimation records `[(u, y, residual), ...]`; by default
+        `starts` on the records joined end to end."""
+        u, y, residual = (np.concatenate([np.asarray(r[i]) for r in records]) for i in range(3))
+        return cls.starts(model, u, y, residual)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -129,12 +151,16 @@ def simulate_extended(model: ExtendedModel, u):
 
 def simulate_with_switches(model: ExtendedModel, u):
     """Simulated output and the backlash regime signals `(y, x, y_cascade)`."""
+    u_model = u
     for effect in model.effects:
         u = effect.input(u)
     inner = signals(model.params, u)
     y = inner.y
     for effect in model.effects:
         y = effect.output(y, inner.x)
+        path = effect.parallel(u_model)
+        if path is not None:
+            y = y + path
     return y, inner.x, inner.y
 
 
@@ -298,6 +324,13 @@ class PwlSegment(Effect):
         return starts
 
 
+from ._effects_hysteresis import (  # noqa: E402  (they subclass Effect, defined above)
+    DahlFriction,
+    InputBacklash,
+    PrandtlIshlinskii,
+    SlackFriction,
+)
+
 EFFECTS: dict[str, type[Effect]] = {
     effect.name: effect
     for effect in (
@@ -308,5 +341,10 @@ EFFECTS: dict[str, type[Effect]] = {
         OutputSaturation,
         OutputDrift,
         OutputFeedthrough,
+        SlackFriction,
+        PrandtlIshlinskii,
+        DahlFriction,
+        InputBacklash,
     )
 }
+HYSTERESIS = ("slack_friction", "prandtl_ishlinskii", "dahl_friction", "input_backlash")

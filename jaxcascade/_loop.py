@@ -5,7 +5,12 @@
 3. If every test passes, stop: nothing is invented.
 4. Otherwise refit the model with each effect of the library added (`_effects`), from
    the current estimate, and score each on the validation record: its NRMSE, and a
-   paired test that its squared errors are smaller than the current model's.
+   paired test that its squared errors are smaller than the current model's. An effect
+   marked `needs_signature` (the hysteresis effects) is tried only when a test of its
+   signature failed: never on a record whose hysteresis test passes. A parallel path
+   linear in its weights (`Effect.linear`) is fitted by ridge least squares on the
+   residual, alternating with refits of the cascade (`fit_parallel`); the others by an
+   output-error Levenberg-Marquardt refit of the extended model (`refit`).
 5. Among the significant candidates, those whose residual signature matches a failed
    test rank first, then by validation NRMSE; the best is added. A coloured residual
    that no deterministic effect explains, with the input tests passing, gets the
@@ -34,14 +39,28 @@ from ._noise import ARNoise
 from ._simulate import backlash_switches, shift
 from ._validate import record
 
+# Compiled once per model structure and record length (the loop simulates the same
+# models on the same records many times).
+_simulate = eqx.filter_jit(simulate_with_switches)
+
+
+def _records(u, y):
+    """`(u, y)` of one record, or sequences of several, as two tuples of arrays."""
+    if isinstance(u, list | tuple):
+        return tuple(u), tuple(y)
+    return (u,), (y,)
+
 
 @eqx.filter_jit
-def _refit(vectors, new: Effect, current: ExtendedModel, u, y, orders: Orders, max_steps: int):
+def _refit(vectors, new: Effect, current: ExtendedModel, us, ys, orders: Orders, max_steps: int):
     """Output-error refit of the current model with `new` added, from a batch of starts
-    (`vmap` over `vectors` and the leading axis of `new`'s parameters). The cascade is
-    refined in its admissible parameterisation (`_estimator._refine`), every effect's
+    (`vmap` over `vectors` and the leading axis of `new`'s parameters), on the records
+    `us`, `ys` (tuples of arrays), each simulated from its own initial state. The cascade
+    is refined in its admissible parameterisation (`_estimator._refine`), every effect's
     free parameters alongside; fixed ones (`Effect.fixed`) are held."""
-    u_min, u_max = jnp.min(u), jnp.max(u)
+    u = us[0]
+    u_min = jnp.min(jnp.stack([jnp.min(v) for v in us]))
+    u_max = jnp.max(jnp.stack([jnp.max(v) for v in us]))
     size = orders.size
 
     def one(vector, effect):
@@ -57,7 +76,9 @@ def _refit(vectors, new: Effect, current: ExtendedModel, u, y, orders: Orders, m
             return ExtendedModel(params, tuple(effects), current.noise)
 
         def residual(z, args):
-            return simulate_with_switches(unpack(z), u)[0] - y
+            model = unpack(z)
+            parts = [simulate_with_switches(model, v)[0] - w for v, w in zip(us, ys, strict=True)]
+            return jnp.concatenate(parts)
 
         z, cost, status, _ = least_squares(residual, z0, None, max_steps=max_steps)
         return unpack(z), cost, status
@@ -67,16 +88,53 @@ def _refit(vectors, new: Effect, current: ExtendedModel, u, y, orders: Orders, m
 
 def refit(model: ExtendedModel, start: Start, u, y, max_steps: int = 150):
     """Add `start.effect` to `model` from the starts `start`; the best start wins (host
-    side). Returns `(model, cost, status)`."""
-    dtype = u.dtype
+    side). `u`, `y`: one record, or sequences of records fitted jointly. Returns
+    `(model, cost, status)`."""
+    us, ys = _records(u, y)
+    dtype = jnp.asarray(us[0]).dtype
+    us = tuple(jnp.asarray(v, dtype) for v in us)
+    ys = tuple(jnp.asarray(v, dtype) for v in ys)
     effect = jax.tree_util.tree_map(lambda leaf: jnp.asarray(leaf, dtype), start.effect)
     models, costs, status = _refit(
-        jnp.asarray(start.vectors, dtype), effect, model, u, y, start.orders, max_steps
+        jnp.asarray(start.vectors, dtype), effect, model, us, ys, start.orders, max_steps
     )
     costs = np.asarray(costs)
     best = int(np.argmin(np.where(np.isfinite(costs), costs, np.inf)))
     chosen = jax.tree_util.tree_map(lambda leaf: leaf[best], models)
     return chosen, float(costs[best]), int(np.asarray(status)[best])
+
+
+def fit_parallel(model: ExtendedModel, effect_class, u, y, alternations: int = 1):
+    """Add a parallel path linear in its weights (`Effect.linear`) to `model`: its
+    weights by ridge least squares on the residual of the current model (structure by
+    cross-validation over the records, `effect_class.fit_records`), then `alternations`
+    times a refit of the model (cascade and earlier effects) on the output minus the
+    path, and a new ridge fit on the new residual. `u`, `y`: one record or sequences of
+    records. Returns `(model, cost, label)`, `cost` the mean squared error over the
+    records."""
+    us, ys = _records(u, y)
+    dtype = jnp.asarray(us[0]).dtype
+    us = tuple(jnp.asarray(v, dtype) for v in us)
+    ys = tuple(jnp.asarray(v, dtype) for v in ys)
+    current = model
+
+    def residuals(current):
+        return [
+            (np.asarray(v), np.asarray(w), np.asarray(w - _simulate(current, v)[0]))
+            for v, w in zip(us, ys, strict=True)
+        ]
+
+    effect, label = effect_class.fit_records(current, residuals(current))
+    for _ in range(alternations):
+        targets = tuple(w - effect.parallel(v) for v, w in zip(us, ys, strict=True))
+        refitted, _, _ = refit(current, _no_effect(current.params), us, targets)
+        current = ExtendedModel(refitted.params, refitted.effects[:-1], refitted.noise)
+        effect, label = effect_class.fit_records(current, residuals(current))
+    final = ExtendedModel(current.params, (*current.effects, effect), current.noise)
+    errors = np.concatenate(
+        [np.asarray(w - _simulate(final, v)[0]) for v, w in zip(us, ys, strict=True)]
+    )
+    return final, float(np.mean(errors**2)), label
 
 
 def model_standard_errors(model: ExtendedModel, u, y) -> dict[str, float]:
@@ -116,10 +174,13 @@ class Evaluation:
     simulated: np.ndarray
     error: float
     tests: ResidualTests
+    window_error: float | None = None
 
 
-def evaluate(model: ExtendedModel, u, y, sample_period: float = 1.0) -> Evaluation:
-    y_sim, x, y_cascade = (np.asarray(a) for a in simulate_with_switches(model, jnp.asarray(u)))
+def evaluate(
+    model: ExtendedModel, u, y, sample_period: float = 1.0, window: tuple[int, int] | None = None
+) -> Evaluation:
+    y_sim, x, y_cascade = (np.asarray(a) for a in _simulate(model, jnp.asarray(u)))
     y = np.asarray(y)
     residual = y - y_sim
     p = model.params
@@ -130,7 +191,8 @@ def evaluate(model: ExtendedModel, u, y, sample_period: float = 1.0) -> Evaluati
     innovations = np.asarray(model.noise.innovations(jnp.asarray(residual)))
     error = score(y, y_sim)
     tests = residual_tests(u, innovations, regime, sample_period=sample_period)
-    return Evaluation(residual, y_sim, error, tests)
+    window_error = None if window is None else score(y[slice(*window)], y_sim[slice(*window)])
+    return Evaluation(residual, y_sim, error, tests, window_error)
 
 
 def paired_improvement(current: np.ndarray, new: np.ndarray) -> float:
@@ -168,6 +230,7 @@ class Candidate:
             "t": self.t,
             "significant": self.significant,
             "signature_match": self.signature_match,
+            "window_error": None if self.evaluation is None else self.evaluation.window_error,
         }
 
 
@@ -179,6 +242,7 @@ class LoopResult:
     final: ExtendedModel
     added: list[str]
     candidates: list[Candidate]
+    steps: list[tuple[str, ExtendedModel, Evaluation]] = dataclasses.field(default_factory=list)
 
     def to_dict(self) -> dict:
         def params(model):
@@ -192,7 +256,13 @@ class LoopResult:
         return {
             "error_before": self.before.error,
             "error_after": self.after.error,
+            "window_error_before": self.before.window_error,
+            "window_error_after": self.after.window_error,
             "effect_added": list(self.added),
+            "steps": [
+                {"model": label, "error": e.error, "window_error": e.window_error}
+                for label, _, e in self.steps
+            ],
             "candidates": [
                 {"name": c.name, "error": c.error, **c.to_dict()} for c in self.candidates
             ],
@@ -219,6 +289,7 @@ def model_error_loop(
     noise_alpha: float = 1e-3,
     sample_period: float = 1.0,
     effects: tuple[str, ...] | None = None,
+    window: tuple[int, int] | None = None,
     progress=None,
 ) -> LoopResult:
     """Run the loop (module docstring) on an estimation and a validation record.
@@ -226,7 +297,10 @@ def model_error_loop(
     **Arguments:**
 
     - `u_est`, `y_est`, `u_val`, `y_val`: 1-D arrays (model units), each record at least
-      `orders.min_samples` long (`_validate.record`: a `ValueError` otherwise).
+      `orders.min_samples` long (`_validate.record`: a `ValueError` otherwise). `u_est`,
+      `y_est` may be lists of several estimation records, estimated jointly (each
+      simulated from its own initial state; the declared cascade's first fit is on the
+      records joined end to end, then refined on each).
     - `orders`: declared orders of the cascade.
     - `base`: a fitted cascade to start from; by default the robust estimator fits one.
     - `t_threshold`, `min_gain`: a candidate is significant when its paired t statistic
@@ -234,17 +308,34 @@ def model_error_loop(
       (relative).
     - `noise_alpha`: level of the likelihood-ratio test for the noise model.
     - `effects`: names of the library to consider (default: all).
+    - `window`: `(start, stop)` samples of the validation record also scored
+      (`Evaluation.window_error`).
     """
     say = progress or (lambda message: None)
-    u_est, y_est = record(u_est, y_est, orders=orders, where="model_error_loop (estimation)")
+    us, ys = _records(u_est, y_est)
+    if len(us) != len(ys):
+        raise ValueError(f"model_error_loop: {len(us)} input records but {len(ys)} outputs.")
+    pairs = [
+        record(u, y, orders=orders, where=f"model_error_loop (estimation record {i + 1})")
+        for i, (u, y) in enumerate(zip(us, ys, strict=True))
+    ]
+    us, ys = tuple(p[0] for p in pairs), tuple(p[1] for p in pairs)
     u_val, y_val = record(u_val, y_val, orders=orders, where="model_error_loop (validation)")
     u_val_np, y_val_np = np.asarray(u_val, float), np.asarray(y_val, float)
+
+    def assess(model):
+        return evaluate(model, u_val_np, y_val_np, sample_period, window)
+
     if base is None:
         say("fitting the declared cascade (robust estimator)")
-        base = jax.device_get(Robust()(u_est, y_est, orders).params)
+        base = jax.device_get(Robust()(jnp.concatenate(us), jnp.concatenate(ys), orders).params)
+        if len(us) > 1:
+            say("refining it on every estimation record")
+            base = refit(plain(base), _no_effect(base), us, ys)[0].params
     model = plain(base)
-    current = evaluate(model, u_val_np, y_val_np, sample_period)
+    current = assess(model)
     before = current
+    steps = [("declared cascade", model, current)]
     names = tuple(effects or (*EFFECTS, ARNoise.name))
     added: list[str] = []
     candidates: list[Candidate] = []
@@ -254,42 +345,40 @@ def model_error_loop(
             break
         failed = set(current.tests.failed)
         say(f"round {round_}: failed tests {sorted(failed)}; error {current.error:.4g}")
-        y_sim_est = np.asarray(simulate_with_switches(model, u_est)[0])
-        residual_est = np.asarray(y_est) - y_sim_est
+        records = [
+            (np.asarray(u), np.asarray(y), np.asarray(y - _simulate(model, u)[0]))
+            for u, y in zip(us, ys, strict=True)
+        ]
         round_candidates = []
-        for name in names:
-            if name in added or name not in EFFECTS:
-                continue
-            effect = EFFECTS[name]
-            best = None
-            for start in effect.starts(model, np.asarray(u_est), np.asarray(y_est), residual_est):
-                fitted, cost, status = refit(model, start, u_est, y_est)
-                if best is None or cost < best[1]:
-                    best = (fitted, cost, start.label)
-            fitted, _, label = best
-            evaluation = evaluate(fitted, u_val_np, y_val_np, sample_period)
-            t = paired_improvement(current.residual, evaluation.residual)
-            gain = 1 - evaluation.error / current.error
-            candidate = Candidate(
-                round_,
+        # Effects marked `needs_signature` (the hysteresis effects) only when a test of
+        # their signature failed.
+        tried = [n for n in names if n not in added and n in EFFECTS]
+        tried = [
+            n for n in tried if not EFFECTS[n].needs_signature or failed & set(EFFECTS[n].signature)
+        ]
+        for name in tried:
+            c = _candidate(
                 name,
-                label,
-                evaluation.error,
-                t,
-                bool(t > t_threshold and gain > min_gain),
-                bool(failed & set(effect.signature)),
-                fitted,
-                evaluation,
+                model,
+                current,
+                failed,
+                round_,
+                us,
+                ys,
+                records,
+                assess,
+                t_threshold=t_threshold,
+                min_gain=min_gain,
             )
+            round_candidates.append(c)
             say(
-                f"  {label:<24} error {evaluation.error:.4g}  t {t:7.2f}  "
-                f"{'significant' if candidate.significant else ''}"
+                f"  {c.label:<24} error {c.error:.4g}  t {c.t:7.2f}  "
+                f"{'significant' if c.significant else ''}"
             )
-            round_candidates.append(candidate)
         if ARNoise.name in names and ARNoise.name not in added:
             noise, p_value = ARNoise.fit(current.residual)
             noise_model = ExtendedModel(model.params, model.effects, noise)
-            evaluation = evaluate(noise_model, u_val_np, y_val_np, sample_period)
+            evaluation = assess(noise_model)
             round_candidates.append(
                 Candidate(
                     round_,
@@ -326,4 +415,40 @@ def model_error_loop(
         say(f"round {round_}: adding {chosen.label} (error {chosen.error:.4g})")
         added.append(chosen.name)
         model, current = chosen.model, chosen.evaluation
-    return LoopResult(before, current, plain(base), model, added, candidates)
+        steps.append((f"+ {chosen.label}", model, current))
+    return LoopResult(before, current, plain(base), model, added, candidates, steps)
+
+
+def _candidate(name, model, current, failed, round_, us, ys, records, assess, **options):
+    """Fit the effect `name` added to `model` and score it on the validation record."""
+    t_threshold, min_gain = options.get("t_threshold", 3.0), options.get("min_gain", 0.02)
+    effect = EFFECTS[name]
+    if effect.linear:
+        fitted, _, label = fit_parallel(model, effect, us, ys)
+    else:
+        best = None
+        for start in effect.starts_records(model, records):
+            fitted, cost, _ = refit(model, start, us, ys, effect.refine_steps)
+            if best is None or cost < best[1]:
+                best = (fitted, cost, start.label)
+        fitted, _, label = best
+    evaluation = assess(fitted)
+    t = paired_improvement(current.residual, evaluation.residual)
+    gain = 1 - evaluation.error / current.error
+    return Candidate(
+        round_,
+        name,
+        label,
+        evaluation.error,
+        t,
+        bool(t > t_threshold and gain > min_gain),
+        bool(failed & set(effect.signature)),
+        fitted,
+        evaluation,
+    )
+
+
+def _no_effect(params: CascadeParams) -> Start:
+    """A start that adds nothing: refines the cascade alone."""
+    vector = np.asarray(params.to_vector())[None]
+    return Start("declared", params.orders, vector, Effect())

@@ -139,3 +139,43 @@ def test_loop_runs_on_the_measured_friction_damper(capsys, tmp_path):
     assert result["error_after"] <= result["error_before"]
     assert len(result["effect_added"]) <= 1
     assert {"report.json", "report.md", "compare.png"} <= {p.name for p in tmp_path.iterdir()}
+
+
+def test_loop_on_several_records_with_a_window(capsys, tmp_path):
+    import jax
+
+    import jaxcascade as jc
+
+    paths = []
+    for seed in (1, 2, 3):
+        u = jc.uniform_input(jax.random.PRNGKey(seed), 600)
+        y = jc.simulate(jc.example(1).params(), u)
+        y = y + 0.05 * jax.random.normal(jax.random.PRNGKey(10 + seed), y.shape)
+        path = tmp_path / f"r{seed}.csv"
+        pd.DataFrame({"u": np.asarray(u), "y": np.asarray(y)}).to_csv(path, index=False)
+        paths.append(str(path))
+    argv = ["loop", paths[0], paths[1], "--validate", paths[2], "--input", "u", "--output", "y"]
+    argv += ["--window", "100:400", "--max-effects", "0", "--json", "--quiet"]
+    argv += ["--report", str(tmp_path / "report")]
+    assert main(argv) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert 0 < result["window_error_before"] == result["window_error_after"] < 0.5
+    full = json.loads((tmp_path / "report" / "report.json").read_text())
+    assert len(full["records"]["estimation"]) == 2
+    assert full["window"]["model_samples"] == [100, 400]
+    # A window outside the validation record is one line, exit 2.
+    argv[argv.index("100:400")] = "100:4000"
+    assert main(argv) == 2
+    assert "--window" in capsys.readouterr().err
+
+
+def test_loop_effects_option_names_the_library(capsys, tmp_path):
+    # An unknown name is one line, exit 2, before any fitting.
+    rng = np.random.default_rng(0)
+    path = tmp_path / "r.csv"
+    pd.DataFrame({"u": rng.normal(size=300), "y": rng.normal(size=300)}).to_csv(path, index=False)
+    argv = ["loop", str(path), "--validate", str(path), "--input", "u", "--output", "y"]
+    argv += ["--effects", "output_offset,no_such_effect", "--quiet"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "--effects" in err and "no_such_effect" in err

@@ -59,7 +59,7 @@ def test_white_noise_false_alarm_rate(input_kind):
             rejections[name] = rejections.get(name, 0) + (not passed)
         if seed < 5:  # and a few lags outside the pointwise bound are normal
             assert tests.autocorrelation.bound == pytest.approx(1.96 / np.sqrt(N))
-    assert len(rejections) == 14
+    assert len(rejections) == 15  # eleven tests (hysteresis included) and four verdicts
     too_many = {name: count for name, count in rejections.items() if count > limit}
     assert not too_many, f"more than {limit:.0f} of {seeds} white records rejected: {too_many}"
 
@@ -181,9 +181,52 @@ def test_figures(tmp_path):
     tests = residual_tests(u, e, regime, sample_period=1 / 128)
     paths = save_residual_figures(tests, tmp_path)
     expected = {"overview", "autocorrelation", "spectrum", "cross_correlation", "e_eu"}
-    expected |= {"u2_e", "u2_e2", "regime", "level", "time"}
+    expected |= {"u2_e", "u2_e2", "regime", "level", "time", "hysteresis"}
     assert {p.stem.removeprefix("residual_") for p in paths} == expected
     assert all(p.stat().st_size > 5000 for p in paths)
     figure = plot_correlation(tests.u2_e)
     assert "FAILED" in figure.axes[0].get_title()
     assert "passed" in plot_groups(tests.regime).axes[0].get_title()
+
+
+# ---- hysteresis test (issue 15) -------------------------------------------------------
+
+
+def _hysteresis_input(n=3000, seed=0):
+    rng = np.random.default_rng(seed)
+    return np.convolve(rng.normal(size=n), np.ones(20) / 20, mode="same") * 5
+
+
+def test_hysteresis_test_is_significant_on_a_hysteretic_residual():
+    from jaxcascade._diagnose import hysteresis_test, stop_outputs
+
+    u = _hysteresis_input()
+    e = stop_outputs(u, [0.3])[:, 0] + 0.1 * np.random.default_rng(1).normal(size=u.size)
+    test = hysteresis_test(u, e)
+    assert not test.passed and test.p_value < 1e-6
+    assert np.max(np.abs(test.values) - test.bounds) > 0  # a threshold outside its bound
+
+
+def test_hysteresis_test_passes_on_a_static_error_and_on_noise():
+    from jaxcascade._diagnose import hysteresis_test
+
+    u = _hysteresis_input(seed=2)
+    noise = 0.1 * np.random.default_rng(3).normal(size=u.size)
+    # A static error (a cubic of the input) is projected out: not hysteresis.
+    assert hysteresis_test(u, noise + 0.2 * u**3 / np.std(u) ** 3).passed
+    assert hysteresis_test(u, noise).passed
+
+
+def test_hysteresis_test_passes_on_a_cascade_record():
+    import jax
+
+    from jaxcascade._diagnose import residual_tests
+    from jaxcascade._effects import simulate_extended
+    from jaxcascade._testing import UNDECLARED, undeclared_record
+
+    model, _ = UNDECLARED[None]()
+    u, y = undeclared_record(model, jax.random.PRNGKey(4), 2000, 20.0)
+    residual = np.asarray(y - simulate_extended(model, u))
+    tests = residual_tests(np.asarray(u), residual)
+    assert tests.hysteresis.passed
+    assert "hysteresis" not in tests.failed

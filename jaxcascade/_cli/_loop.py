@@ -8,13 +8,14 @@ after (`residual_before_*.png`, `residual_after_*.png`).
 
 from __future__ import annotations
 
+import dataclasses
 import pathlib
 import sys
 
 import numpy as np
 
 from .._arx import best_arx
-from .._data import read_record
+from .._data import Scaling, read_record
 from .._loop import model_error_loop
 from .._metrics import fit_percent, score
 from .._plot._loop import plot_compare
@@ -41,6 +42,17 @@ def _markdown(report: dict, command: str) -> str:
         f"(fit {fit_percent(report['error_after']):.1f} %)",
         f"- effects added: {', '.join(report['effect_added']) or 'none'}",
     ]
+    if report.get("window"):
+        lines.append(
+            f"- window {report['window']['stored']} (stored samples): NRMSE before "
+            f"{report['window_error_before']:.4f}, after {report['window_error_after']:.4f}"
+        )
+    lines += ["", "| model | NRMSE | window NRMSE |", "|---|---|---|"]
+    for step in report["steps"]:
+        w = step["window_error"]
+        lines.append(
+            f"| {step['model']} | {step['error']:.4f} | {'-' if w is None else f'{w:.4f}'} |"
+        )
     if "arx" in report:
         arx = report["arx"]
         lines.append(
@@ -83,6 +95,26 @@ def _p(test) -> str:
     return f"{p:.3g} {mark}" if p is not None else mark
 
 
+def _window(text, decimate: int, length: int):
+    """`--window START:STOP` (samples of the stored file) in samples of the decimated
+    record, or None."""
+    if text is None:
+        return None
+    try:
+        start, stop = (int(part) for part in text.split(":"))
+    except ValueError:
+        raise CLIError(f"--window takes START:STOP in samples, got {text!r}.") from None
+    first, last = start // decimate, -(-stop // decimate)
+    if not 0 <= start < stop or last > length:
+        raise CLIError(
+            f"--window {text}: needs 0 <= START < STOP within the validation record "
+            f"({length * decimate} samples as stored)."
+        )
+    if last - first < 2:
+        raise CLIError(f"--window {text}: fewer than 2 samples after decimation by {decimate}.")
+    return first, last
+
+
 def run_loop(args) -> int:
     orders = parse_orders(args.orders)
     if args.max_effects < 0:
@@ -90,10 +122,20 @@ def run_loop(args) -> int:
     if args.decimate < 1:
         raise CLIError(f"--decimate must be an integer >= 1, got {args.decimate}.")
     options = dict(time_column=args.time, decimate=args.decimate, orders=orders)
-    estimation = read_record(args.train, args.input, args.output, scaling=args.scaling, **options)
-    validation = read_record(
-        args.validate, args.input, args.output, scaling=estimation.scaling, **options
+    raw = [
+        read_record(path, args.input, args.output, scaling="none", **options) for path in args.train
+    ]
+    scaling = Scaling.from_data(
+        np.concatenate([r.u for r in raw]), np.concatenate([r.y for r in raw]), args.scaling
     )
+    training = [
+        dataclasses.replace(
+            r, u=scaling.input_to_model(r.u), y=scaling.output_to_model(r.y), scaling=scaling
+        )
+        for r in raw
+    ]
+    validation = read_record(args.validate, args.input, args.output, scaling=scaling, **options)
+    window = _window(args.window, args.decimate, len(validation))
     if args.report:
         writable_folder(args.report, "--report")
 
@@ -102,25 +144,39 @@ def run_loop(args) -> int:
             print(message, file=sys.stderr, flush=True)
 
     result = model_error_loop(
-        estimation.u,
-        estimation.y,
+        [r.u for r in training],
+        [r.y for r in training],
         validation.u,
         validation.y,
         orders,
         max_effects=args.max_effects,
         sample_period=validation.sample_period or 1.0,
+        window=window,
         progress=say,
+        effects=_effects(args.effects),
     )
     full = result.to_dict()
-    arx = best_arx(estimation.u, estimation.y)
+    # The ARX peer is fitted on the estimation records joined end to end.
+    arx = best_arx(np.concatenate([r.u for r in training]), np.concatenate([r.y for r in training]))
     arx_val = arx.simulate(validation.u)
     full["arx"] = {
         "na": arx.orders[0],
         "nb": arx.orders[1],
         "error": score(validation.y, arx_val),
+        "window_error": None
+        if window is None
+        else score(validation.y[slice(*window)], arx_val[slice(*window)]),
     }
-    full["records"] = {"estimation": estimation.to_dict(), "validation": validation.to_dict()}
+    full["window"] = (
+        None if window is None else {"stored": args.window, "model_samples": list(window)}
+    )
+    full["records"] = {
+        "estimation": [r.to_dict() for r in training],
+        "validation": validation.to_dict(),
+    }
     keys = ("error_before", "error_after", "effect_added", "candidates", "residual_tests")
+    if window is not None:
+        keys += ("window_error_before", "window_error_after")
     if args.json:
         print(strict_json({key: full[key] for key in keys}))
     else:
@@ -153,6 +209,21 @@ def run_loop(args) -> int:
     return 0
 
 
+def _effects(text: str | None) -> tuple[str, ...] | None:
+    """`--effects a,b`: names of the library (and the noise model) the loop considers."""
+    if text is None:
+        return None
+    from .._effects import EFFECTS
+    from .._noise import ARNoise
+
+    names = tuple(name.strip() for name in text.split(",") if name.strip())
+    unknown = [name for name in names if name not in {*EFFECTS, ARNoise.name}]
+    if unknown or not names:
+        known = ", ".join([*EFFECTS, ARNoise.name])
+        raise CLIError(f"--effects: unknown effect(s) {unknown or text!r}; known: {known}.")
+    return names
+
+
 def add_parser(subparsers) -> None:
     parser = subparsers.add_parser(
         "loop",
@@ -165,12 +236,27 @@ def add_parser(subparsers) -> None:
             "jaxcascade loop train.csv --validate valid.csv --input u --output y",
             "jaxcascade loop train.csv --validate valid.csv --input u --output y "
             "--time t --decimate 4 --report results/loop",
+            "jaxcascade loop a.csv b.parquet --validate c.csv --input u --output y "
+            "--decimate 8 --window 3072:7680 --json",
         ),
     )
-    parser.add_argument("train", help="estimation record (CSV or Parquet)")
+    parser.add_argument(
+        "train", nargs="+", help="estimation record(s) (CSV or Parquet), estimated jointly"
+    )
     parser.add_argument("--validate", required=True, help="validation record")
     add_record_arguments(parser, scaling="scale")
     parser.add_argument("--max-effects", type=int, default=3)
+    parser.add_argument(
+        "--window",
+        default=None,
+        help="START:STOP: also score the validation record on these samples of the file "
+        "as stored (before decimation)",
+    )
+    parser.add_argument(
+        "--effects",
+        default=None,
+        help="NAME,NAME: the effects of the library the loop considers (default: all)",
+    )
     parser.add_argument("--report", default=None, help="folder for the report and figures")
     parser.add_argument("--json", action="store_true", help="print the JSON summary")
     parser.add_argument("--quiet", action="store_true", help="no progress on stderr")

@@ -126,9 +126,30 @@ def plot_spectrum(test, axes=None):
     return figure
 
 
+def plot_hysteresis(test, ax=None):
+    """Partial correlation of the residual with stop operators of the input against the
+    threshold, with the simultaneous bounds; the direction means in the title."""
+    figure, ax = _new_axes(ax)
+    r, values, bounds = (np.asarray(a) for a in (test.thresholds, test.values, test.bounds))
+    ax.plot(r, values, "o-", ms=3, label="corr(e, stop_r(u) | cubic in u)")
+    ax.fill_between(r, -bounds, bounds, color="0.85", label="simultaneous bound")
+    ax.set_xscale("log")
+    ax.set_xlabel("stop-operator threshold r (model units)")
+    means = ", ".join(
+        f"{label} {m:.3g}"
+        for label, m in zip(test.direction.labels, test.direction.means, strict=True)
+    )
+    ax.set_title(f"hysteresis: {_verdict(test)} (means {means})", fontsize=9)
+    ax.legend(fontsize=7)
+    return figure
+
+
 def plot_test(test):
     """A new figure for one test of a `ResidualTests`."""
-    from .._diagnose import CorrelationTest, DriftTest, GroupTest, SpectrumTest
+    from .._diagnose import CorrelationTest, DriftTest, GroupTest, HysteresisTest, SpectrumTest
+
+    if isinstance(test, HysteresisTest):
+        return plot_hysteresis(test)
 
     if isinstance(test, CorrelationTest):
         return plot_correlation(test)
@@ -160,6 +181,8 @@ def plot_residual_tests(tests):
             plot_drift(test, ax=ax)
         elif name in ("regime", "level"):
             plot_groups(test, ax=ax)
+        elif name == "hysteresis":
+            plot_hysteresis(test, ax=ax)
         else:
             plot_correlation(test, ax=ax)
     plot_spectrum(tests.spectrum, axes=[figure.add_subplot(grid[rows - 1, j]) for j in (0, 1)])

@@ -1,0 +1,310 @@
+"""Hysteresis effects of the model-error loop (operators in `_hysteresis`).
+
+Each is a path in parallel with the cascade (`Effect.parallel`: its force is added to
+the cascade's output) except `InputBacklash`, which acts on the input. Their residual
+signature is the `hysteresis` test of `_diagnose` (the residual depends on the direction
+of motion or on a stop operator of the input), and the loop tries them only when that
+test failed (`Effect.needs_signature`).
+
+Fitting. `SlackFriction`, `PrandtlIshlinskii` and `DahlFriction` are linear in their
+weights once a structure is fixed (a threshold, a grid of thresholds, a rate): each
+structure of a small grid gives features of the input, the weights are a ridge
+least-squares fit to the current model's residual (`_hysteresis.ridge`), and the
+structure and the ridge parameter are chosen by leave-one-record-out cross-validation
+over the estimation records (first half / second half when there is one record; each
+record weighted by 1/length), never on the validation record (`fit_records`). The loop
+then alternates a refit of the cascade on the output minus the path with a new ridge fit
+(`_loop.fit_parallel`); no Levenberg-Marquardt refit of the extended model.
+`InputBacklash` is nonlinear: the loop refits it with the cascade by output-error
+Levenberg-Marquardt from the best gap of a grid.
+
+- `SlackFriction` (issue 15 (a)): friction behind a slack zone. A stop operator with
+  threshold `r` (the slack half-width plus the elastic travel) feeds the static map
+  `slack_map`: zero for `|s| <= dead r`, linear ramps to the plateaus `upper` (at
+  `s = r`, sliding forward) and `lower` (at `s = -r`, sliding back):
+  `F = upper clip((s/r - dead)/(1 - dead), 0, 1) + lower clip((-s/r - dead)/(1 - dead), 0, 1)`.
+  This is a rotor held by Coulomb friction and dragged through a slack of width
+  `2 dead r` by a contact of stiffness `upper / ((1 - dead) r)`.
+- `PrandtlIshlinskii` (b): `F = c + sum_k w_k . basis_k(u)`, the stop operators on a
+  fixed grid of thresholds and hinges of each (`pi_basis`), linear in the weights `w`;
+  the grid size and the ridge parameter are chosen by leave-one-record-out
+  cross-validation over the estimation records (halves of the record when there is one).
+- `DahlFriction` (c): `F = dahl(u; sigma, level)`.
+- `InputBacklash` (d): the cascade with a backlash (play operator, half-width `gap`) in
+  front of the static nonlinearity: `y = cascade(play(u))`.
+"""
+
+from __future__ import annotations
+
+import itertools
+from typing import ClassVar
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from ._effects import Effect, Start, _batched, _repeat
+from ._hysteresis import dahl, pi_basis, ridge, slack_map, stop_operator, stop_operators
+
+_SIGNATURE = ("hysteresis",)
+
+
+def _span(u) -> float:
+    u = np.asarray(u)
+    return float(np.quantile(u, 0.995) - np.quantile(u, 0.005)) or 1.0
+
+
+REGULARISATIONS = (1e-8, 1e-6, 1e-4, 1e-2)
+
+
+def _folds(records):
+    """Cross-validation folds: the records, or the two halves of a single record."""
+    if len(records) > 1:
+        return [tuple(np.asarray(a) for a in r) for r in records]
+    u, y, e = (np.asarray(a) for a in records[0])
+    h = len(u) // 2
+    return [(u[:h], y[:h], e[:h]), (u[h:], y[h:], e[h:])]
+
+
+def cross_validate(structures, features, records, regularisations=REGULARISATIONS):
+    """Choose a structure and a ridge parameter by leave-one-fold-out cross-validation
+    of a ridge fit to the residuals (`_folds`; each fold weighted by 1/length, its error
+    normalised by its residual variance), then fit the weights on every record.
+
+    **Arguments:** `structures`: a list of hashable structures; `features(structure,
+    u)`: the `T x P` features of the input `u`; `records`: `[(u, y, residual), ...]`.
+
+    **Returns:** `(structure, weights, table)`, `table` rows `(structure, ridge, error)`.
+    """
+    folds = _folds(records)
+    targets = [f[2] for f in folds]
+    w = [1.0 / len(t) for t in targets]
+    table = []
+    for structure in structures:
+        X = [features(structure, f[0]) for f in folds]
+        for lam in regularisations:
+            errors = []
+            for k in range(len(X)):
+                keep = [i for i in range(len(X)) if i != k]
+                theta = ridge(
+                    [X[i] for i in keep], [targets[i] for i in keep], [w[i] for i in keep], lam
+                )
+                errors.append(
+                    np.mean((targets[k] - X[k] @ theta) ** 2) / (np.var(targets[k]) or 1.0)
+                )
+            table.append((structure, lam, float(np.mean(errors))))
+    structure, lam, _ = min(table, key=lambda row: row[2])
+    X = [features(structure, np.asarray(r[0])) for r in records]
+    targets = [np.asarray(r[2]) for r in records]
+    theta = ridge(X, targets, [1.0 / len(t) for t in targets], lam)
+    return structure, theta, table
+
+
+class _LinearPath(Effect):
+    """A parallel path linear in its weights for a fixed structure (module docstring)."""
+
+    linear: ClassVar[bool] = True
+    needs_signature: ClassVar[bool] = True
+
+    @classmethod
+    def fit_records(cls, model, records) -> tuple[Effect, str]:
+        """The effect (unbatched) fitted to the residuals of `records`
+        `[(u, y, residual), ...]` (structure by cross-validation), and a label."""
+        raise NotImplementedError
+
+    @classmethod
+    def starts_records(cls, model, records):
+        effect, label = cls.fit_records(model, records)
+        batched = _batched(cls, **{k: [v] for k, v in effect.parameters().items()})
+        return [Start(label, model.orders, _repeat(model, 1), batched)]
+
+    @classmethod
+    def starts(cls, model, u, y, residual):
+        return cls.starts_records(model, [(u, y, residual)])
+
+
+class SlackFriction(_LinearPath):
+    name: ClassVar[str] = "slack_friction"
+    signature: ClassVar[tuple[str, ...]] = _SIGNATURE
+    description: ClassVar[str] = (
+        "friction behind a slack zone: stop operator (threshold r) then a dead zone "
+        "(|s| <= dead r) and plateaus upper, lower"
+    )
+    # Structures: thresholds (fractions of the input span) x dead-zone fractions.
+    fractions: ClassVar[tuple[float, ...]] = (0.02, 0.035, 0.05, 0.075, 0.1, 0.15, 0.2, 0.3)
+    deads: ClassVar[tuple[float, ...]] = (0.0, 0.2, 0.4, 0.6, 0.8)
+
+    threshold: Float[Array, ""]
+    dead: Float[Array, ""]
+    upper: Float[Array, ""]
+    lower: Float[Array, ""]
+
+    def parallel(self, u):
+        r = jnp.abs(self.threshold) + 1e-6
+        s = stop_operator(u, r)
+        dead = jnp.clip(self.dead, 0.0, 0.98)
+        return slack_map(s, r, dead, self.upper, self.lower)
+
+    @classmethod
+    def fit_records(cls, model, records):
+        span = _span(np.concatenate([np.asarray(r[0]) for r in records]))
+        radii = np.array(cls.fractions) * span
+        cache = {}
+
+        def features(structure, u):
+            k, dead = structure
+            key = (id(u), len(u))
+            if key not in cache:
+                cache[key] = (u, np.asarray(stop_operators(jnp.asarray(u), radii)) / radii)
+            x = cache[key][1][:, k]
+            up = np.clip((x - dead) / (1 - dead), 0, 1)
+            down = np.clip((-x - dead) / (1 - dead), 0, 1)
+            return np.stack([up, down], 1)
+
+        structures = list(itertools.product(range(len(radii)), cls.deads))
+        (k, dead), (upper, lower), _ = cross_validate(structures, features, records)
+        effect = cls(*(jnp.asarray(float(v)) for v in (radii[k], dead, upper, lower)))
+        return effect, f"{cls.name}:r={cls.fractions[k]:g}span,dead={dead:g}"
+
+
+class PrandtlIshlinskii(_LinearPath):
+    name: ClassVar[str] = "prandtl_ishlinskii"
+    signature: ClassVar[tuple[str, ...]] = _SIGNATURE
+    description: ClassVar[str] = (
+        "Prandtl-Ishlinskii sum of stop operators (thresholds on a grid, fixed) and hinges "
+        "of each, linear in the weights"
+    )
+    fixed: ClassVar[tuple[str, ...]] = ("thresholds", "knots")
+    sizes: ClassVar[tuple[int, ...]] = (4, 8, 16, 24)
+    knot_values: ClassVar[tuple[float, ...]] = (0.5, 0.9)
+
+    thresholds: Float[Array, " K"]
+    knots: Float[Array, " J"]
+    weights: Float[Array, " P"]
+    offset: Float[Array, ""]
+
+    def parallel(self, u):
+        return pi_basis(u, self.thresholds, self.knots) @ self.weights + self.offset
+
+    @classmethod
+    def grid(cls, span: float, size: int) -> np.ndarray:
+        """Thresholds from 1% to 50% of the input span, geometrically spaced."""
+        return np.geomspace(0.01 * span, 0.5 * span, size)
+
+    @classmethod
+    def _features(cls, u, thresholds):
+        knots = jnp.asarray(cls.knot_values)
+        X = np.asarray(pi_basis(jnp.asarray(u), jnp.asarray(thresholds), knots))
+        return np.concatenate([X, np.ones((len(X), 1))], 1)
+
+    @classmethod
+    def select(cls, records):
+        """Grid size and ridge parameter by cross-validation (`cross_validate`).
+        Returns `(thresholds, weights, offset, cv_table)`."""
+        span = _span(np.concatenate([np.asarray(r[0]) for r in records]))
+        grids = {size: cls.grid(span, size) for size in cls.sizes}
+        every = np.concatenate(list(grids.values()))
+        columns, at = {}, 0
+        for size in cls.sizes:
+            columns[size] = slice(at, at + size)
+            at += size
+        knots = np.asarray(cls.knot_values)
+        cache = {}
+
+        def features(size, u):
+            # The stop operators of every grid at once, one scan per record (`pi_basis`
+            # in NumPy from them).
+            key = (id(u), len(u))
+            if key not in cache:
+                cache[key] = (u, np.asarray(stop_operators(jnp.asarray(u), every)) / every)
+            x = cache[key][1][:, columns[size]]
+            up = np.maximum(x[:, :, None] - knots, 0.0).reshape(len(x), -1)
+            down = np.maximum(-x[:, :, None] - knots, 0.0).reshape(len(x), -1)
+            return np.concatenate([x, up, down, np.ones((len(x), 1))], 1)
+
+        size, theta, table = cross_validate(list(cls.sizes), features, records)
+        return grids[size], theta[:-1], theta[-1], table
+
+    @classmethod
+    def fit_records(cls, model, records):
+        thresholds, weights, offset, _ = cls.select(records)
+        effect = cls(
+            jnp.asarray(thresholds),
+            jnp.asarray(cls.knot_values),
+            jnp.asarray(weights),
+            jnp.asarray(float(offset)),
+        )
+        return effect, f"{cls.name}:K={len(thresholds)}"
+
+
+class DahlFriction(_LinearPath):
+    name: ClassVar[str] = "dahl_friction"
+    signature: ClassVar[tuple[str, ...]] = _SIGNATURE
+    description: ClassVar[str] = (
+        "Dahl friction: dF = sigma du (1 - F/level sgn du), in parallel with the cascade"
+    )
+    # A Dahl force is its level times a unit-level Dahl force of rate sigma / level: for
+    # a fixed rate it is linear in the level. Rates: 1 / (fraction of the input span).
+    fractions: ClassVar[tuple[float, ...]] = (0.01, 0.02, 0.05, 0.1, 0.2, 0.3)
+
+    sigma: Float[Array, ""]
+    level: Float[Array, ""]
+
+    def parallel(self, u):
+        # A negative level is a force opposing the usual sign convention of the record.
+        level = jnp.abs(self.level) + 1e-6
+        return jnp.sign(self.level) * dahl(u, jnp.abs(self.sigma), level)
+
+    @classmethod
+    def fit_records(cls, model, records):
+        span = _span(np.concatenate([np.asarray(r[0]) for r in records]))
+
+        def features(fraction, u):
+            return np.asarray(dahl(jnp.asarray(u), 1.0 / (fraction * span), 1.0))[:, None]
+
+        fraction, (level,), _ = cross_validate(list(cls.fractions), features, records)
+        rate = 1.0 / (fraction * span)
+        effect = cls(jnp.asarray(rate * abs(float(level))), jnp.asarray(float(level)))
+        return effect, f"{cls.name}:travel={fraction:g}span"
+
+
+class InputBacklash(Effect):
+    name: ClassVar[str] = "input_backlash"
+    signature: ClassVar[tuple[str, ...]] = _SIGNATURE
+    description: ClassVar[str] = (
+        "backlash (play operator, half-width gap) in front of the static nonlinearity"
+    )
+    fractions: ClassVar[tuple[float, ...]] = (0.02, 0.05, 0.1, 0.2)
+    refine_steps: ClassVar[int] = 30
+    needs_signature: ClassVar[bool] = True
+
+    gap: Float[Array, ""]
+
+    def input(self, u):
+        return u - stop_operator(u, jnp.abs(self.gap))
+
+    @classmethod
+    def starts_records(cls, model, records):
+        """One start: the gap of the grid whose model (the current cascade, not refitted)
+        has the smallest squared error on the records."""
+        from ._effects import ExtendedModel, simulate_extended
+
+        simulate = eqx.filter_jit(simulate_extended)
+        span = _span(np.concatenate([np.asarray(r[0]) for r in records]))
+        costs = []
+        for fraction in cls.fractions:
+            effect = cls(jnp.asarray(fraction * span))
+            extended = ExtendedModel(model.params, (*model.effects, effect), model.noise)
+            costs.append(
+                sum(
+                    float(np.sum((np.asarray(y) - simulate(extended, jnp.asarray(u))) ** 2))
+                    for u, y, _ in records
+                )
+            )
+        gap = cls.fractions[int(np.nanargmin(costs))] * span
+        return [Start(cls.name, model.orders, _repeat(model, 1), _batched(cls, gap=[gap]))]
+
+    @classmethod
+    def starts(cls, model, u, y, residual):
+        return cls.starts_records(model, [(u, y, residual)])
