@@ -16,7 +16,7 @@ LAYERS = [
     {"_sensitivity"},
     {"_regression", "_normal_equations", "_fused"},
     {"_estimator", "_efficiency"},
-    {"_data", "_arx", "_diagnose", "_effects", "_noise", "_loop", "_testing"},
+    {"_data", "_arx", "_hysteresis", "_diagnose", "_effects", "_noise", "_loop", "_testing"},
     {"_montecarlo"},
     {"_plot", "_benchmark"},
     {"_cli"},

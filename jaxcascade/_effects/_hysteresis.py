@@ -44,8 +44,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from ._effects import Effect, Start, _batched, _repeat
-from ._hysteresis import dahl, pi_basis, ridge, slack_map, stop_operator, stop_operators
+from .._hysteresis import dahl, pi_basis, ridge, slack_map, stop_operator, stop_operators
+from ._base import Effect, Start, _batched, _repeat
 
 _SIGNATURE = ("hysteresis",)
 
@@ -288,7 +288,7 @@ class InputBacklash(Effect):
     def starts_records(cls, model, records):
         """One start: the gap of the grid whose model (the current cascade, not refitted)
         has the smallest squared error on the records."""
-        from ._effects import ExtendedModel, simulate_extended
+        from ._base import ExtendedModel, simulate_extended
 
         simulate = eqx.filter_jit(simulate_extended)
         span = _span(np.concatenate([np.asarray(r[0]) for r in records]))

@@ -14,7 +14,8 @@ named in `fixed` are held during refinement (an integer delay), the rest are ref
 with the cascade (`free_filter`, for `eqx.partition`). The noise model is its own type
 (`_noise.ARNoise`): it changes no simulated output.
 
-To add an effect: subclass `Effect` here and add it to `EFFECTS`.
+To add an effect: subclass `Effect` in a module of this package and add it to `EFFECTS`
+(`_effects/__init__.py`).
 """
 
 from __future__ import annotations
@@ -28,9 +29,9 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from ._model import CascadeParams, Orders
-from ._noise import ARNoise
-from ._simulate import signals
+from .._model import CascadeParams, Orders
+from .._noise import ARNoise
+from .._simulate import signals
 
 
 class Effect(eqx.Module):
@@ -322,29 +323,3 @@ class PwlSegment(Effect):
                 vectors.append(_embed(model.params, orders, values))
             starts.append(Start(f"{cls.name}:{side}", orders, np.array(vectors), cls()))
         return starts
-
-
-from ._effects_hysteresis import (  # noqa: E402  (they subclass Effect, defined above)
-    DahlFriction,
-    InputBacklash,
-    PrandtlIshlinskii,
-    SlackFriction,
-)
-
-EFFECTS: dict[str, type[Effect]] = {
-    effect.name: effect
-    for effect in (
-        OutputOffset,
-        InputDelay,
-        DynamicsOrder,
-        PwlSegment,
-        OutputSaturation,
-        OutputDrift,
-        OutputFeedthrough,
-        SlackFriction,
-        PrandtlIshlinskii,
-        DahlFriction,
-        InputBacklash,
-    )
-}
-HYSTERESIS = ("slack_friction", "prandtl_ishlinskii", "dahl_friction", "input_backlash")

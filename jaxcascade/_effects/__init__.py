@@ -1,0 +1,75 @@
+"""The effect library and its registry (`_base`: the interface and the cascade's
+structural and output effects; `_hysteresis`: friction and hysteresis paths).
+
+To add an effect: its class in a module here, and its entry in `EFFECTS`."""
+
+from ._base import (
+    DynamicsOrder as DynamicsOrder,
+)
+from ._base import (
+    Effect as Effect,
+)
+from ._base import (
+    ExtendedModel as ExtendedModel,
+)
+from ._base import (
+    InputDelay as InputDelay,
+)
+from ._base import (
+    OutputDrift as OutputDrift,
+)
+from ._base import (
+    OutputFeedthrough as OutputFeedthrough,
+)
+from ._base import (
+    OutputOffset as OutputOffset,
+)
+from ._base import (
+    OutputSaturation as OutputSaturation,
+)
+from ._base import (
+    PwlSegment as PwlSegment,
+)
+from ._base import (
+    Start as Start,
+)
+from ._base import (
+    plain as plain,
+)
+from ._base import (
+    simulate_extended as simulate_extended,
+)
+from ._base import (
+    simulate_with_switches as simulate_with_switches,
+)
+from ._hysteresis import (
+    DahlFriction as DahlFriction,
+)
+from ._hysteresis import (
+    InputBacklash as InputBacklash,
+)
+from ._hysteresis import (
+    PrandtlIshlinskii as PrandtlIshlinskii,
+)
+from ._hysteresis import (
+    SlackFriction as SlackFriction,
+)
+
+EFFECTS: dict[str, type[Effect]] = {
+    effect.name: effect
+    for effect in (
+        OutputOffset,
+        InputDelay,
+        DynamicsOrder,
+        PwlSegment,
+        OutputSaturation,
+        OutputDrift,
+        OutputFeedthrough,
+        SlackFriction,
+        PrandtlIshlinskii,
+        DahlFriction,
+        InputBacklash,
+    )
+}
+# the hysteresis paths: tried only when the hysteresis residual test failed
+HYSTERESIS = tuple(name for name, effect in EFFECTS.items() if effect.needs_signature)
