@@ -233,7 +233,6 @@ def add_parser(subparsers) -> None:
             "on the validation record, add the effect the residual points to, repeat."
         ),
         epilog=examples(
-            "jaxcascade loop train.csv --validate valid.csv --input u --output y",
             "jaxcascade loop train.csv --validate valid.csv --input u --output y "
             "--time t --decimate 4 --report results/loop",
             "jaxcascade loop a.csv b.parquet --validate c.csv --input u --output y "
