@@ -80,3 +80,18 @@ def test_batched_fit_takes_each_records_path(records):
     )
     assert int(batched.status[1]) == int(one.status)
     np.testing.assert_allclose(batched.params.to_vector()[0], batched.params.to_vector()[2])
+
+
+@pytest.mark.slow
+def test_an_estimate_on_the_domain_edge_is_not_accepted():
+    # Random family, seed 1, realisation 17 (results/robust_vs_literal_seed1): the literal
+    # estimate puts DL1 on the wrong side of 0; refined, it stayed on the edge (DL1 = -0)
+    # with a white residual and was reported `converged`, inadmissible, NRMSE inf on the
+    # validation record. Now the adaptive path refuses it and the multi-start recovers it.
+    spec = jc.Spec(
+        family="random", n=3000, snr=(30.0,), realisations=100, estimators=("robust",),
+        chunk_size=8, seed=1,
+    )  # fmt: skip
+    row = jc.run_chunk(spec, spec.cells()[0], [17]).iloc[0]
+    assert row["admissible"] and row["robust_path"] == "multistart"
+    assert row["status"] == "converged" and row["recovered"]

@@ -55,7 +55,7 @@ import jax.numpy as jnp
 from jax.custom_batching import custom_vmap
 from jaxtyping import Array, Float, PRNGKeyArray
 
-from .._model import CascadeParams, Orders
+from .._model import CascadeParams, Orders, is_admissible
 from .._prior import random_system
 from .._status import Status
 from .._validate import record
@@ -209,7 +209,11 @@ def _robust(
     if not adaptive:
         stage = eqx.tree_at(lambda s: s.accepted, stage, jnp.zeros((), bool))
     fit = _fallback(functools.partial(_multistart, orders=orders, **settings), fallback_batch)
-    return fit(u, y, key, stage)
+    solution = fit(u, y, key, stage)
+    # never `converged` outside the model's domain (the literal start can end on its edge)
+    inside = is_admissible(solution.params, jnp.min(u), jnp.max(u))
+    status = jnp.where(inside | _failed(solution.status), solution.status, Status.left_domain)
+    return eqx.tree_at(lambda s: s.status, solution, status.astype(solution.status.dtype))
 
 
 def _adaptive(u, y, orders, *, rtol, atol, steps, bound) -> _Stage:
@@ -237,7 +241,10 @@ def _adaptive(u, y, orders, *, rtol, atol, steps, bound) -> _Stage:
     # a fit to rounding (NRMSE <= 1e-10, noise-free records) is exact: its residual is
     # rounding error, whose whiteness says nothing
     exact = fit.cost <= 1e-20 * jnp.var(y)
-    accepted = (status == Status.converged) & ((statistic <= bound) | exact)
+    # an estimate on the domain's edge (a breakpoint at 0 where the literal estimate had
+    # the wrong sign) is not a fit in the true basin, whatever its residual
+    admissible = is_admissible(fit.params, jnp.min(u), jnp.max(u))
+    accepted = (status == Status.converged) & ((statistic <= bound) | exact) & admissible
     solution = Solution(
         params=fit.params,
         history=jnp.stack([init.to_vector(), start, estimate]),
