@@ -151,7 +151,7 @@ def test_stop_operator_matches_the_numpy_oracle():
 
 
 def test_prandtl_ishlinskii_is_linear_in_its_weights():
-    from jaxcascade._effects_hysteresis import PrandtlIshlinskii
+    from jaxcascade._effects import PrandtlIshlinskii
 
     u = jnp.asarray(_triangle())
     thresholds, knots = jnp.array([0.1, 0.4]), jnp.array([0.5])
@@ -167,7 +167,7 @@ def test_prandtl_ishlinskii_is_linear_in_its_weights():
 
 
 def test_slack_friction_plateaus_and_dead_zone():
-    from jaxcascade._effects_hysteresis import SlackFriction
+    from jaxcascade._effects import SlackFriction
 
     u = jnp.asarray(_triangle())
     effect = SlackFriction(*(jnp.asarray(v) for v in (0.3, 0.5, 2.0, -1.5)))
@@ -193,7 +193,7 @@ def test_dahl_reaches_its_level():
 def test_hysteresis_effect_is_refitted_on_several_records():
     # A cascade plus a friction path: the loop machinery refits the path's parameters
     # jointly on two records, each from its own initial state.
-    from jaxcascade._effects_hysteresis import SlackFriction
+    from jaxcascade._effects import SlackFriction
     from jaxcascade._loop import refit
 
     truth = SlackFriction(*(jnp.asarray(v) for v in (0.4, 0.4, 1.0, -0.8)))
