@@ -19,7 +19,7 @@ distributed() {  # issue 7: in-process vs 1 and 2 local Dask workers
     python benchmarks/distributed_throughput.py --realisations 2048 --n 2000 --workers 1,2 \
         --out results/distributed_throughput.csv
 }
-robust() {  # issue 4: literal vs robust, 100 realisations per cell (robust ~2 s per fit),
+robust() {  # issue 4: literal vs robust, 100 realisations per cell,
     # and a replicate on fresh records (seed 1); the scripts resume, so old tables go first
     rm -rf results/robust_vs_literal results/robust_vs_literal_seed1
     python benchmarks/robust_vs_literal.py --realisations 100 --chunk-size 8 --quiet \
