@@ -132,7 +132,9 @@ def ridge(features, targets, weights=None, regularisation: float = 1e-6):
     )
     size = gram.shape[0]
     gram = gram + regularisation * np.trace(gram) / size * np.eye(size)
-    return np.linalg.solve(gram, rhs)
+    # minimum-norm where features vanish on these records (a threshold beyond the
+    # record's travel gives an all-zero column, and an all-zero Gram has no ridge)
+    return np.linalg.lstsq(gram, rhs, rcond=None)[0]
 
 
 _LUGRE = ("sigma0", "sigma1", "sigma2", "fc_pos", "fc_neg", "fs_pos", "fs_neg", "vs")

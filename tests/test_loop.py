@@ -210,3 +210,13 @@ def test_hysteresis_effect_is_refitted_on_several_records():
     (start,) = SlackFriction.starts_records(base, rows)[:1]
     fitted, cost, _ = refit(base, start, [r[0] for r in records], [r[1] for r in records], 30)
     assert cost < 1e-3 * np.var(np.asarray(records[0][1]))
+
+
+def test_ridge_with_vanishing_features_is_minimum_norm():
+    from jaxcascade._hysteresis import ridge
+
+    X = np.zeros((50, 3))
+    X[:, 0] = np.linspace(-1, 1, 50)
+    theta = ridge([X], [2.0 * X[:, 0]])
+    np.testing.assert_allclose(theta, [2.0, 0.0, 0.0], atol=1e-4)
+    np.testing.assert_array_equal(ridge([np.zeros((10, 2))], [np.ones(10)]), [0.0, 0.0])
