@@ -16,3 +16,20 @@ os.environ["JAXCASCADE_CACHE"] = "off"
 import jax  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
+
+
+import pytest  # noqa: E402
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _release_compiled_code():
+    """Free every compiled executable after each test module. A full run compiles
+    thousands of programs; XLA's CPU code for each is mapped into the process, and two
+    full runs crashed late (a segfault reading a cache entry, an abort inside an XLA
+    compile) with that code still held. Each module starts from empty caches instead."""
+    yield
+    from jaxcascade._montecarlo import _engine
+
+    _engine._EXECUTABLES.clear()
+    _engine._compiled.cache_clear()
+    jax.clear_caches()

@@ -126,6 +126,7 @@ BRFD = os.path.join(os.path.dirname(__file__), "..", "..", "shared", "data", "br
     not os.path.isdir(BRFD),
     reason="the measured BRFD records live in ../shared/data/brfd, absent on this machine",
 )
+@pytest.mark.slow  # a joint loop on the measured records: minutes
 def test_loop_runs_on_the_measured_friction_damper(capsys, tmp_path):
     data = os.path.join(BRFD, "earthquake_kocaeli_dbe.csv")
     valid = os.path.join(BRFD, "earthquake_imperialvalley_dbe.csv")
