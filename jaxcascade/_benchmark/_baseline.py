@@ -286,7 +286,7 @@ def voros(
     tol: float = 1e-8,
     se_tol: float = 1e-3,
     cost_tol: float = 1e-12,
-    cycle_period: int = 8,
+    cycle_period: int = 16,
     divergence_bound: float = 1e6,
 ) -> BaselineSolution:
     """The literal Vörös iteration in NumPy, with the stopping rules of `jaxcascade.voros`
