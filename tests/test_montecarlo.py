@@ -253,6 +253,12 @@ def test_killed_run_resumes_to_an_identical_table(tmp_path, capsys):
     assert meta["dtype"] == "float64" and meta["spec"]["snr"] == [25.0, 50.0]
     assert {"jaxcascade", "jax", "numpy", "command"} <= set(meta)
     assert meta["normal_equations"] in ("fused", "xla")
+    # every setting of the estimator is on record, defaults included
+    from jaxcascade._estimator import ESTIMATORS
+
+    assert set(meta["estimator_settings"]) == {"literal"}
+    assert set(meta["estimator_settings"]["literal"]) == set(ESTIMATORS["literal"].settings())
+    assert meta["estimator_settings"]["literal"]["cycle_period"] == 16
 
     out = tmp_path / "killed.parquet"
     partial = tmp_path / "killed.parquet.partial"

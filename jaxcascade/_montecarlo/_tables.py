@@ -329,9 +329,12 @@ def compare(summary: pd.DataFrame, baseline: pd.DataFrame, threshold: float = 3.
 
 def run_metadata(spec, dtype, normal_equations: str, command: list[str] | None = None) -> dict:
     """Versions, dtype, how the literal iteration formed its normal equations (`fused` or
-    `xla`, same estimates up to rounding, as the engine reports it), spec and command
-    line, stored in the Parquet schema metadata."""
+    `xla`, same estimates up to rounding, as the engine reports it), spec, every
+    estimator's settings in full (defaults included: a default that changes between
+    versions stays on record) and command line, stored in the Parquet schema metadata."""
     import jax
+
+    from .._estimator import ESTIMATORS
 
     return {
         "jaxcascade": __version__,
@@ -342,8 +345,24 @@ def run_metadata(spec, dtype, normal_equations: str, command: list[str] | None =
         "dtype": str(np.dtype(dtype)),
         "normal_equations": normal_equations,
         "spec": spec.to_dict(),
+        "estimator_settings": {
+            name: _plain({**ESTIMATORS[name].settings(), **dict(spec.estimator_settings(name))})
+            for name in spec.estimators
+        },
         "command": list(sys.argv if command is None else command),
     }
+
+
+def _plain(settings: dict) -> dict:
+    # JSON-safe: tuples as lists, anything else that JSON cannot hold as its repr
+    def plain(value):
+        if isinstance(value, (bool, int, float, str)) or value is None:
+            return value
+        if isinstance(value, (tuple, list)):
+            return [plain(v) for v in value]
+        return repr(value)
+
+    return {key: plain(value) for key, value in settings.items()}
 
 
 def write_table(table: pd.DataFrame, path, metadata: dict) -> None:
