@@ -41,6 +41,8 @@ sweeps() {  # issue 3: SNR x N sweeps of both paper examples, 500 realisations p
 literal() {  # issue 11: the paper's iteration under each reading of its first step
     rm -rf results/literal_readings
     python benchmarks/literal_readings.py --quiet --out results/literal_readings
+    rm -rf results/literal_criterion
+    python benchmarks/literal_criterion.py --out results/literal_criterion
 }
 efficiency() {  # issue 13: literal and robust against the Cramer-Rao bound
     rm -rf results/efficiency
