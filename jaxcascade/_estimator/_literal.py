@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import functools
+import inspect
 from typing import ClassVar
 
 import equinox as eqx
@@ -242,19 +243,20 @@ def _voros(
     u: Float[Array, " T"],
     y: Float[Array, " T"],
     orders: Orders,
-    init: CascadeParams | None = None,
+    init: CascadeParams | None,
     *,
-    first_step: str = "full",
-    max_iterations: int = 50,
-    tol: float = 1e-8,
-    se_tol: float = 1e-3,
-    cost_tol: float = 1e-12,
-    cycle_period: int = 16,
-    domain_stop: bool = False,
-    divergence_bound: float = 1e6,
-    backend: str = "auto",
+    first_step: str,
+    max_iterations: int,
+    tol: float,
+    se_tol: float,
+    cost_tol: float,
+    cycle_period: int,
+    domain_stop: bool,
+    divergence_bound: float,
+    backend: str,
 ) -> Solution:
-    # The jitted core of `voros`, which checks the record first.
+    # The jitted core of `voros`, which checks the record first; the defaults are
+    # `voros`'s (and `Literal`'s, which reads them from there).
     dtype = u.dtype
     y = y.astype(dtype)
     u_min, u_max = jnp.min(u), jnp.max(u)
@@ -364,6 +366,14 @@ def _voros(
     return finite(solution, start)
 
 
+# `voros`'s settings and their defaults: the one place they are written down.
+_VOROS = {
+    name: parameter.default
+    for name, parameter in inspect.signature(voros).parameters.items()
+    if parameter.kind is inspect.Parameter.KEYWORD_ONLY
+}
+
+
 class Literal(Estimator):
     """The paper's iteration (`voros`) from the paper's initial values.
 
@@ -377,14 +387,14 @@ class Literal(Estimator):
     name: ClassVar[str] = "literal"
     summary: ClassVar[str] = "the paper's iteration (eqs. 19-28) from its initial values"
 
-    first_step: str = setting("full")
-    max_iterations: int = setting(50)
-    tol: float = setting(1e-8)
-    se_tol: float = setting(1e-3)
-    cost_tol: float = setting(1e-12)
-    cycle_period: int = setting(16)
-    domain_stop: bool = setting(False)
-    divergence_bound: float = setting(1e6)
+    first_step: str = setting(_VOROS["first_step"])
+    max_iterations: int = setting(_VOROS["max_iterations"])
+    tol: float = setting(_VOROS["tol"])
+    se_tol: float = setting(_VOROS["se_tol"])
+    cost_tol: float = setting(_VOROS["cost_tol"])
+    cycle_period: int = setting(_VOROS["cycle_period"])
+    domain_stop: bool = setting(_VOROS["domain_stop"])
+    divergence_bound: float = setting(_VOROS["divergence_bound"])
 
     def __check_init__(self):
         if self.first_step not in FIRST_STEPS:
