@@ -43,6 +43,9 @@ from ._base import (
     simulate_with_switches as simulate_with_switches,
 )
 from ._hysteresis import (
+    BacklashFriction as BacklashFriction,
+)
+from ._hysteresis import (
     DahlFriction as DahlFriction,
 )
 from ._hysteresis import (
@@ -66,6 +69,7 @@ EFFECTS: dict[str, type[Effect]] = {
         OutputDrift,
         OutputFeedthrough,
         SlackFriction,
+        BacklashFriction,
         PrandtlIshlinskii,
         DahlFriction,
         InputBacklash,

@@ -1,0 +1,86 @@
+"""Issue 15, fast check: one hysteresis effect alone fitted on the measured friction
+damper's estimation records, scored on the other design-basis earthquake.
+
+    python benchmarks/brfd_effect.py [--data ../shared/data/brfd] [--decimate 16]
+        [--effects backlash_friction,slack_friction] [--out results/brfd/effects.md]
+
+For each effect named (the registry's `fit_records` on the raw force: no cascade) and
+both directions (30 lb harmonic tests + Imperial Valley DBE -> Kocaeli DBE, and
+30 lb harmonics + Kocaeli -> Imperial Valley): the effect is fitted on the estimation
+records, simulated from rest on the validation record from its displacement alone, and
+scored by NRMSE on the whole record and on the strong-motion window (`brfd.WINDOWS`).
+Same effect settings both ways. Seconds, not the minutes of the full loop
+(`benchmarks/brfd.py`). Prints a Markdown table (and writes it with --out).
+"""
+
+from __future__ import annotations
+
+import argparse
+import pathlib
+import sys
+import time
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--data", default="../shared/data/brfd")
+    parser.add_argument("--decimate", type=int, default=16)
+    parser.add_argument("--effects", default="backlash_friction,slack_friction")
+    parser.add_argument("--out", default=None)
+    args = parser.parse_args(argv)
+
+    import jax
+
+    jax.config.update("jax_enable_x64", True)
+    import jax.numpy as jnp
+    import numpy as np
+
+    sys.path.insert(0, str(pathlib.Path(__file__).parent))
+    from brfd import FILES, WINDOWS, harmonic_files
+
+    from jaxcascade._data import read_record
+    from jaxcascade._effects import EFFECTS
+    from jaxcascade._metrics import score
+
+    data = pathlib.Path(args.data)
+    options = dict(time_column="time_s", decimate=args.decimate, scaling="none")
+
+    def load(path):
+        r = read_record(path, "displacement_in", "force_kip", **options)
+        return np.asarray(r.u, float), np.asarray(r.y, float)
+
+    harmonics = [load(p) for p in harmonic_files(data)]
+    quakes = {name: load(data / file) for name, file in FILES.items()}
+    lines = [
+        "| effect | estimation | validation | window NRMSE | NRMSE | seconds | fitted |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for name in args.effects.split(","):
+        cls = EFFECTS[name]
+        for train, valid in (("imperialvalley", "kocaeli"), ("kocaeli", "imperialvalley")):
+            started = time.perf_counter()
+            records = [(u, y, y) for u, y in [*harmonics, quakes[train]]]
+            effect, label = cls.fit_records(None, records)
+            u, y = quakes[valid]
+            predicted = np.asarray(effect.parallel(jnp.asarray(u)))
+            a, b = WINDOWS[valid][0] // args.decimate, -(-WINDOWS[valid][1] // args.decimate)
+            seconds = time.perf_counter() - started
+            lines.append(
+                f"| {name} | 30 lb harmonics + {train} | {valid} | "
+                f"{score(y[a:b], predicted[a:b]):.3f} | {score(y, predicted):.3f} | "
+                f"{seconds:.0f} | {label} |"
+            )
+            print(lines[-1], flush=True)
+    command = (
+        f"python benchmarks/brfd_effect.py --data {args.data} --decimate {args.decimate} "
+        f"--effects {args.effects}"
+    )
+    text = "\n".join([f"Command: `{command}`", "", *lines]) + "\n"
+    if args.out:
+        pathlib.Path(args.out).write_text(text)
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
