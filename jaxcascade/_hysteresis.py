@@ -25,9 +25,10 @@ enter linearly (host side).
   `F = k (max(s - g, 0) + min(s + g, 0))`. The force is 0 in the slack `|s| <= g`,
   rises with slope `k` on contact and saturates at `F+` or `-F-` while the rotor
   slides. Where the rotor starts in the slack is unknown from the displacement:
-  `backlash_friction` averages the force over `n` starts `s(0)` evenly spaced on
-  `[-g, g]` (the mean prediction over a uniform initial position; every start gives the
-  same force once the rotor has slid both ways).
+  `backlash_friction` averages the force over several starts `s(0)` (the mean prediction
+  over a prior on the initial position: evenly spaced on `[-g, g]`, or `+-g`, at rest
+  against either side); every start gives the same force once the rotor has slid both
+  ways.
 """
 
 from __future__ import annotations
@@ -90,19 +91,20 @@ def slack_map(s, r, dead, upper, lower, stiffness_ratio=None):
     return upper * ramp_up + lower * ramp_down
 
 
-def backlash_friction(u, gap, stiffness, upper, lower, starts: int = 1):
+def backlash_friction(u, gap, stiffness, upper, lower, starts=(0.0,)):
     """Backlash friction force (module docstring) for the displacement `u`: slack
     half-width `gap`, contact stiffness `stiffness`, levels `upper = F+` and
-    `lower = F-` (all > 0), averaged over `starts` (static) initial positions evenly
-    spaced on `[-gap, gap]` (1: the centre). Traceable and differentiable in every
-    parameter almost everywhere.
+    `lower = F-` (all > 0), averaged over the initial positions `s(0) = gap * starts`
+    (`starts`: fractions of the half-width; 0 the centre of the slack, +-1 at rest
+    against either side, beyond +-1 a preloaded contact, clipped to the limits).
+    Traceable and differentiable in every parameter almost everywhere.
 
     **Returns:** `Float[Array, " T"]`.
     """
     dtype = u.dtype
     gap, stiffness, upper, lower = (jnp.asarray(v, dtype) for v in (gap, stiffness, upper, lower))
     lo, hi = -(gap + lower / stiffness), gap + upper / stiffness
-    s0 = gap * (jnp.linspace(-1.0, 1.0, starts, dtype=dtype) if starts > 1 else jnp.zeros(1, dtype))
+    s0 = jnp.clip(gap * jnp.atleast_1d(jnp.asarray(starts, dtype)), lo, hi)
     du = jnp.diff(u, prepend=u[:1])
 
     def step(s, d):
@@ -112,6 +114,16 @@ def backlash_friction(u, gap, stiffness, upper, lower, starts: int = 1):
 
     _, out = jax.lax.scan(step, s0, du)
     return out
+
+
+def backlash_friction_start(force, gap, stiffness, offset=0.0):
+    """The start fraction (`backlash_friction`'s `starts`) of a rotor in contact with the
+    initial force `force` (0: the centre of the slack): `sgn(f) (1 + |f| / (k gap))`,
+    `f = force - offset`. For comparisons that use a measured initial force."""
+    f = float(force) - float(offset)
+    if f == 0.0:
+        return 0.0
+    return float(np.sign(f) * (1.0 + abs(f) / (float(stiffness) * float(gap))))
 
 
 @jax.jit

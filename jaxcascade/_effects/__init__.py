@@ -46,6 +46,9 @@ from ._hysteresis import (
     BacklashFriction as BacklashFriction,
 )
 from ._hysteresis import (
+    BacklashFrictionContacts as BacklashFrictionContacts,
+)
+from ._hysteresis import (
     DahlFriction as DahlFriction,
 )
 from ._hysteresis import (
@@ -70,6 +73,7 @@ EFFECTS: dict[str, type[Effect]] = {
         OutputFeedthrough,
         SlackFriction,
         BacklashFriction,
+        BacklashFrictionContacts,
         PrandtlIshlinskii,
         DahlFriction,
         InputBacklash,

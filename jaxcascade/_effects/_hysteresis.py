@@ -29,8 +29,9 @@ Levenberg-Marquardt from the best gap of a grid.
   a contact stiffness (`_hysteresis.backlash_friction`): a stop operator with limits
   `-(gap + lower/stiffness)`, `gap + upper/stiffness` and
   `F = offset + stiffness (max(s - gap, 0) + min(s + gap, 0))`, averaged over
-  `starts_in_slack` initial positions of the rotor in the slack (unknown from the
-  displacement). Unlike `SlackFriction` its slack, stiffness and two levels are fitted
+  initial positions of the rotor (`start_fractions`, unknown from the displacement:
+  evenly on the slack); `BacklashFrictionContacts` (`backlash_friction_contacts`)
+  averages over the two contacts instead (the rotor at rest against either side). Unlike `SlackFriction` its slack, stiffness and two levels are fitted
   jointly by output-error Levenberg-Marquardt on the residuals of the estimation records
   (each record weighted by 1/length) from a small grid of starts (`fit_records`); the
   loop alternates it with refits of the cascade like the linear paths.
@@ -184,8 +185,9 @@ class BacklashFriction(_LinearPath):
         "Coulomb friction (levels upper, lower) behind a slack (half-width gap) through a "
         "contact of stiffness k, averaged over the rotor's unknown start in the slack"
     )
-    # Initial positions of the rotor in the slack averaged over (1: the centre).
-    starts_in_slack: ClassVar[int] = 9
+    # Initial positions of the rotor averaged over, fractions of the slack half-width
+    # (the prior on where it starts, unknown from the displacement): evenly on the slack.
+    start_fractions: ClassVar[tuple[float, ...]] = tuple(np.linspace(-1.0, 1.0, 9).tolist())
     # Starts of the fit: slack half-width and elastic travel (level / stiffness) as
     # fractions of the input span.
     gap_fractions: ClassVar[tuple[float, ...]] = (0.01, 0.03, 0.1)
@@ -207,7 +209,7 @@ class BacklashFriction(_LinearPath):
             jnp.abs(self.stiffness) + tiny,
             jnp.abs(self.upper),
             jnp.abs(self.lower),
-            self.starts_in_slack,
+            self.start_fractions,
         )
 
     @classmethod
@@ -224,7 +226,7 @@ class BacklashFriction(_LinearPath):
         scales = tuple(1.0 / np.sqrt(len(y)) for y in ys)
         span = _span(np.concatenate([np.asarray(u) for u in us]))
         level = float(np.mean([np.quantile(np.abs(np.asarray(y)), 0.9) for y in ys])) or 1.0
-        n = cls.starts_in_slack
+        n = cls.start_fractions
 
         def residual(z, args):
             g, k, up, lo = jnp.exp(z[:4])
@@ -255,6 +257,15 @@ class BacklashFriction(_LinearPath):
         effect = cls(*(jnp.asarray(float(v)) for v in theta))
         g, k, up, lo, _ = theta
         return effect, f"{cls.name}:gap={g:.3g},k={k:.3g},levels={up:.3g}/{lo:.3g}"
+
+
+class BacklashFrictionContacts(BacklashFriction):
+    name: ClassVar[str] = "backlash_friction_contacts"
+    description: ClassVar[str] = (
+        "backlash_friction with the rotor starting at rest against either side of the "
+        "slack (mean of the two)"
+    )
+    start_fractions: ClassVar[tuple[float, ...]] = (-1.0, 1.0)
 
 
 class PrandtlIshlinskii(_LinearPath):
