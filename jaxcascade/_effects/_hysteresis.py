@@ -179,6 +179,15 @@ class SlackFriction(_LinearPath):
 
 
 class BacklashFriction(_LinearPath):
+    """Coulomb friction behind a slack (module docstring). Not linear in its
+    parameters: it reuses the linear paths' route through the loop (`fit_records` on the
+    residuals, alternating with refits of the cascade), with an output-error
+    Levenberg-Marquardt fit (`fit`) in place of the ridge fit.
+
+    Parameters: `gap` (slack half-width, input units), `stiffness` (contact stiffness,
+    output per input unit), `upper`, `lower` (friction levels sliding forward and back,
+    > 0), `offset` (output offset). Signs of the first four are immaterial."""
+
     name: ClassVar[str] = "backlash_friction"
     signature: ClassVar[tuple[str, ...]] = _SIGNATURE
     description: ClassVar[str] = (
