@@ -31,8 +31,9 @@ Levenberg-Marquardt from the best gap of a grid.
   `F = offset + stiffness (max(s - gap, 0) + min(s + gap, 0))`, averaged over
   initial positions of the rotor (`start_fractions`, unknown from the displacement:
   evenly on the slack); `BacklashFrictionContacts` (`backlash_friction_contacts`)
-  averages over the two contacts instead (the rotor at rest against either side). Unlike `SlackFriction` its slack, stiffness and two levels are fitted
-  jointly by output-error Levenberg-Marquardt on the residuals of the estimation records
+  averages over the two contacts instead (the rotor at rest against either side).
+  Unlike `SlackFriction` its slack, stiffness and two levels are fitted jointly by
+  output-error Levenberg-Marquardt on the residuals of the estimation records
   (each record weighted by 1/length) from a small grid of starts (`fit_records`); the
   loop alternates it with refits of the cascade like the linear paths.
 - `PrandtlIshlinskii` (b): `F = c + sum_k w_k . basis_k(u)`, the stop operators on a
@@ -54,7 +55,15 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from .._hysteresis import backlash_friction, dahl, pi_basis, ridge, slack_map, stop_operator, stop_operators
+from .._hysteresis import (
+    backlash_friction,
+    dahl,
+    pi_basis,
+    ridge,
+    slack_map,
+    stop_operator,
+    stop_operators,
+)
 from ._base import Effect, Start, _batched, _repeat
 
 _SIGNATURE = ("hysteresis",)
