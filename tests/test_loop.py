@@ -181,6 +181,83 @@ def test_slack_friction_plateaus_and_dead_zone():
     np.testing.assert_allclose(force[s <= -0.3 + 1e-12], -1.5, atol=1e-4)  # sliding back
 
 
+def test_backlash_friction_slack_stiffness_and_levels():
+    # A triangle of amplitude 1 through a slack of half-width 0.1, stiffness 20, levels
+    # 2 (forward) and 1.5 (back): after each reversal the force falls to 0 with slope k,
+    # stays 0 for 2 gap of travel, then rises with slope k to the other level.
+    from jaxcascade._hysteresis import backlash_friction
+
+    u = _triangle(period=2000)
+    gap, k, upper, lower = 0.1, 20.0, 2.0, 1.5
+    force = np.asarray(backlash_friction(jnp.asarray(u), gap, k, upper, lower))
+    assert force.max() == pytest.approx(upper, abs=1e-12)
+    assert force.min() == pytest.approx(-lower, abs=1e-12)
+    # The second cycle, from the top (u = 1, sliding forward): the force is zero over a
+    # travel of exactly 2 gap, after an elastic unloading of upper / k.
+    top = 2000 + 500
+    travel = u[top] - u[top : top + 1000]
+    zero = np.abs(force[top : top + 1000]) < 1e-12
+    assert travel[zero].min() == pytest.approx(upper / k, abs=2e-3)
+    assert travel[zero].max() - travel[zero].min() == pytest.approx(2 * gap, abs=4e-3)
+    contact = (travel > upper / k + 2 * gap + 0.01) & (travel < upper / k + 2 * gap + 0.05)
+    slope = np.diff(force[top : top + 1000][contact]) / np.diff(-travel[contact])
+    np.testing.assert_allclose(slope, k, rtol=1e-9)
+
+
+def test_backlash_friction_starts_are_forgotten_after_sliding_both_ways():
+    from jaxcascade._hysteresis import backlash_friction, backlash_friction_start
+
+    u = jnp.asarray(_triangle(period=400))
+    one = np.asarray(backlash_friction(u, 0.1, 20.0, 2.0, 1.5, (0.0,)))
+    mean = np.asarray(backlash_friction(u, 0.1, 20.0, 2.0, 1.5, np.linspace(-1, 1, 9)))
+    # Before the first slides the starts disagree (the mean is not the centre's force);
+    # after sliding forward and back (u from 1 to -1) every start gives the same force.
+    assert np.abs(one[:100] - mean[:100]).max() > 0.1
+    np.testing.assert_allclose(one[300:], mean[300:], atol=1e-12)
+    # A start from a measured initial force reproduces it while the input is at rest.
+    start = backlash_friction_start(0.7, 0.1, 20.0, offset=0.2)
+    rest = jnp.zeros(10)
+    np.testing.assert_allclose(backlash_friction(rest, 0.1, 20.0, 2.0, 1.5, (start,)), 0.5)
+    assert backlash_friction_start(0.2, 0.1, 20.0, offset=0.2) == 0.0
+
+
+def test_backlash_friction_is_traceable_and_differentiable():
+    from jaxcascade._hysteresis import backlash_friction
+
+    u = jnp.asarray(_triangle(period=400))
+
+    def cost(theta):
+        return jnp.sum(backlash_friction(u, *theta, (-1.0, 1.0)) ** 2)
+
+    grad = jax.jit(jax.grad(cost))(jnp.array([0.1, 20.0, 2.0, 1.5]))
+    assert np.all(np.isfinite(np.asarray(grad))) and np.all(np.asarray(grad) != 0)
+
+
+@pytest.mark.parametrize("name", ["backlash_friction", "backlash_friction_contacts"])
+def test_backlash_friction_effect_recovers_its_parameters(name):
+    # Two synthetic records of different amplitudes (a rotor that slides in both), noise
+    # 0.05: the output-error fit from the default grid of starts recovers the slack, the
+    # stiffness, both levels and the offset.
+    from jaxcascade._effects import HYSTERESIS
+
+    effect_class = EFFECTS[name]
+    assert effect_class.needs_signature and name in HYSTERESIS
+    truth = effect_class(*(jnp.asarray(v) for v in (0.08, 30.0, 2.3, 2.0, 0.1)))
+    rng = np.random.default_rng(3)
+    rows = []
+    for amplitude in (0.5, 0.25):
+        u = np.cumsum(rng.normal(size=1500))
+        u = scipy.signal.lfilter([0.05], [1, -0.95], u - u.mean())
+        u = amplitude * u / np.abs(u).max()
+        y = np.asarray(truth.parallel(jnp.asarray(u))) + 0.05 * rng.normal(size=u.size)
+        rows.append((u, y, y))
+    fitted, label = effect_class.fit_records(None, rows)
+    assert label.startswith(name + ":")
+    got = [abs(float(v)) for v in (fitted.gap, fitted.stiffness, fitted.upper, fitted.lower)]
+    np.testing.assert_allclose(got, [0.08, 30.0, 2.3, 2.0], rtol=0.05)
+    assert float(fitted.offset) == pytest.approx(0.1, abs=0.02)
+
+
 def test_dahl_reaches_its_level():
     from jaxcascade._hysteresis import dahl
 

@@ -43,6 +43,12 @@ from ._base import (
     simulate_with_switches as simulate_with_switches,
 )
 from ._hysteresis import (
+    BacklashFriction as BacklashFriction,
+)
+from ._hysteresis import (
+    BacklashFrictionContacts as BacklashFrictionContacts,
+)
+from ._hysteresis import (
     DahlFriction as DahlFriction,
 )
 from ._hysteresis import (
@@ -66,6 +72,8 @@ EFFECTS: dict[str, type[Effect]] = {
         OutputDrift,
         OutputFeedthrough,
         SlackFriction,
+        BacklashFriction,
+        BacklashFrictionContacts,
         PrandtlIshlinskii,
         DahlFriction,
         InputBacklash,

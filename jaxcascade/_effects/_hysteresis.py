@@ -25,6 +25,17 @@ Levenberg-Marquardt from the best gap of a grid.
   `F = upper clip((s/r - dead)/(1 - dead), 0, 1) + lower clip((-s/r - dead)/(1 - dead), 0, 1)`.
   This is a rotor held by Coulomb friction and dragged through a slack of width
   `2 dead r` by a contact of stiffness `upper / ((1 - dead) r)`.
+- `BacklashFriction` (issue 15 (a), physical form): Coulomb friction behind a slack with
+  a contact stiffness (`_hysteresis.backlash_friction`): a stop operator with limits
+  `-(gap + lower/stiffness)`, `gap + upper/stiffness` and
+  `F = offset + stiffness (max(s - gap, 0) + min(s + gap, 0))`, averaged over
+  initial positions of the rotor (`start_fractions`, unknown from the displacement:
+  evenly on the slack); `BacklashFrictionContacts` (`backlash_friction_contacts`)
+  averages over the two contacts instead (the rotor at rest against either side).
+  Unlike `SlackFriction` its slack, stiffness and two levels are fitted jointly by
+  output-error Levenberg-Marquardt on the residuals of the estimation records
+  (each record weighted by 1/length) from a small grid of starts (`fit_records`); the
+  loop alternates it with refits of the cascade like the linear paths.
 - `PrandtlIshlinskii` (b): `F = c + sum_k w_k . basis_k(u)`, the stop operators on a
   fixed grid of thresholds and hinges of each (`pi_basis`), linear in the weights `w`;
   the grid size and the ridge parameter are chosen by leave-one-record-out
@@ -44,7 +55,15 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from .._hysteresis import dahl, pi_basis, ridge, slack_map, stop_operator, stop_operators
+from .._hysteresis import (
+    backlash_friction,
+    dahl,
+    pi_basis,
+    ridge,
+    slack_map,
+    stop_operator,
+    stop_operators,
+)
 from ._base import Effect, Start, _batched, _repeat
 
 _SIGNATURE = ("hysteresis",)
@@ -166,6 +185,105 @@ class SlackFriction(_LinearPath):
         (k, dead), (upper, lower), _ = cross_validate(structures, features, records)
         effect = cls(*(jnp.asarray(float(v)) for v in (radii[k], dead, upper, lower)))
         return effect, f"{cls.name}:r={cls.fractions[k]:g}span,dead={dead:g}"
+
+
+class BacklashFriction(_LinearPath):
+    """Coulomb friction behind a slack (module docstring). Not linear in its
+    parameters: it reuses the linear paths' route through the loop (`fit_records` on the
+    residuals, alternating with refits of the cascade), with an output-error
+    Levenberg-Marquardt fit (`fit`) in place of the ridge fit.
+
+    Parameters: `gap` (slack half-width, input units), `stiffness` (contact stiffness,
+    output per input unit), `upper`, `lower` (friction levels sliding forward and back,
+    > 0), `offset` (output offset). Signs of the first four are immaterial."""
+
+    name: ClassVar[str] = "backlash_friction"
+    signature: ClassVar[tuple[str, ...]] = _SIGNATURE
+    description: ClassVar[str] = (
+        "Coulomb friction (levels upper, lower) behind a slack (half-width gap) through a "
+        "contact of stiffness k, averaged over the rotor's unknown start in the slack"
+    )
+    # Initial positions of the rotor averaged over, fractions of the slack half-width
+    # (the prior on where it starts, unknown from the displacement): evenly on the slack.
+    start_fractions: ClassVar[tuple[float, ...]] = tuple(np.linspace(-1.0, 1.0, 9).tolist())
+    # Starts of the fit: slack half-width and elastic travel (level / stiffness) as
+    # fractions of the input span.
+    gap_fractions: ClassVar[tuple[float, ...]] = (0.01, 0.03, 0.1)
+    travel_fractions: ClassVar[tuple[float, ...]] = (0.01, 0.04)
+    max_steps: ClassVar[int] = 200
+
+    gap: Float[Array, ""]
+    stiffness: Float[Array, ""]
+    upper: Float[Array, ""]
+    lower: Float[Array, ""]
+    offset: Float[Array, ""]
+
+    def parallel(self, u):
+        # Magnitudes: the sign of every parameter but the offset is immaterial.
+        tiny = 1e-9
+        return self.offset + backlash_friction(
+            u,
+            jnp.abs(self.gap),
+            jnp.abs(self.stiffness) + tiny,
+            jnp.abs(self.upper),
+            jnp.abs(self.lower),
+            self.start_fractions,
+        )
+
+    @classmethod
+    def fit(cls, records) -> tuple[np.ndarray, float]:
+        """Output-error fit to the targets of `records` `[(u, target), ...]` jointly
+        (each record's squared error weighted by 1/length): parameters
+        `(gap, stiffness, upper, lower, offset)` and the weighted mean squared error."""
+        import jax
+
+        from .._estimator._refine import least_squares
+
+        us = tuple(jnp.asarray(np.asarray(r[0], float)) for r in records)
+        ys = tuple(jnp.asarray(np.asarray(r[1], float)) for r in records)
+        scales = tuple(1.0 / np.sqrt(len(y)) for y in ys)
+        span = _span(np.concatenate([np.asarray(u) for u in us]))
+        level = float(np.mean([np.quantile(np.abs(np.asarray(y)), 0.9) for y in ys])) or 1.0
+        n = cls.start_fractions
+
+        def residual(z, args):
+            g, k, up, lo = jnp.exp(z[:4])
+            return jnp.concatenate(
+                [
+                    c * (z[4] + backlash_friction(u, g, k, up, lo, n) - y)
+                    for u, y, c in zip(us, ys, scales, strict=True)
+                ]
+            )
+
+        solve = jax.jit(lambda z0: least_squares(residual, z0, None, max_steps=cls.max_steps))
+        best = None
+        for gap, travel in itertools.product(cls.gap_fractions, cls.travel_fractions):
+            start = [gap * span, level / (travel * span), level, level]
+            z0 = jnp.asarray(np.log(start).tolist() + [0.0])
+            z, cost, *_ = solve(z0)
+            cost = float(cost)
+            if np.isfinite(cost) and (best is None or cost < best[1]):
+                best = (np.asarray(z), cost)
+        if best is None:
+            raise ValueError("backlash_friction: no start gave a finite fit")
+        z, cost = best
+        return np.concatenate([np.exp(z[:4]), z[4:]]), cost * len(np.concatenate(ys)) / len(ys)
+
+    @classmethod
+    def fit_records(cls, model, records):
+        theta, _ = cls.fit([(r[0], r[2]) for r in records])
+        effect = cls(*(jnp.asarray(float(v)) for v in theta))
+        g, k, up, lo, _ = theta
+        return effect, f"{cls.name}:gap={g:.3g},k={k:.3g},levels={up:.3g}/{lo:.3g}"
+
+
+class BacklashFrictionContacts(BacklashFriction):
+    name: ClassVar[str] = "backlash_friction_contacts"
+    description: ClassVar[str] = (
+        "backlash_friction with the rotor starting at rest against either side of the "
+        "slack (mean of the two)"
+    )
+    start_fractions: ClassVar[tuple[float, ...]] = (-1.0, 1.0)
 
 
 class PrandtlIshlinskii(_LinearPath):
