@@ -50,3 +50,13 @@ def test_spd_solve_matches_numpy_and_flags_a_bad_pivot():
     assert not bool(ok)
     solution, ok = _linalg.spd_solve(-jnp.eye(2), jnp.ones(2))
     assert not bool(ok) and bool(jnp.all(jnp.isfinite(solution)))
+
+
+def test_gauss_jordan_pivots_are_the_squared_cholesky_diagonal():
+    rng = np.random.default_rng(3)
+    a = rng.standard_normal((30, 6))
+    matrix = a.T @ a
+    rhs = np.concatenate([rng.standard_normal((6, 1)), np.eye(6)], axis=1)
+    solution, pivots = _linalg.gauss_jordan(jnp.asarray(matrix), jnp.asarray(rhs))
+    np.testing.assert_allclose(pivots, np.diag(np.linalg.cholesky(matrix)) ** 2, rtol=1e-12)
+    np.testing.assert_allclose(solution, np.linalg.solve(matrix, rhs), rtol=1e-10, atol=1e-12)
