@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
@@ -109,17 +110,18 @@ def solve_normal_equations(
 
 def solve_gram(gram, rhs):
     """Solve `gram @ theta = rhs` (symmetric positive semi-definite) with Jacobi scaling
-    and a Cholesky factorisation, and flag a singular system. Never raises, never NaN.
+    and Gauss-Jordan elimination, and flag a singular system. Never raises, never NaN.
 
     A singular system (a column identically zero: a regime or segment never active; or a
     pivot of the scaled Cholesky factor below ~sqrt(1e4 eps): columns that are linearly
     dependent at this estimate) still gets a solution, the one the paper's iteration can
     go on from (`_estimator._literal.voros`): close to the minimum-norm least-squares
-    solution that `numpy.linalg.lstsq` gives, from a second Cholesky factorisation with a
+    solution that `numpy.linalg.lstsq` gives, from a second elimination with a
     ridge of `1e-8 max(diag gram)` on the unscaled diagonal (a direction the record does
     not determine gets ~0, a determined one is changed by ~1e-8 relative). A ridge, not
-    an eigendecomposition: it costs one small factorisation per step. The algebra is
-    `_linalg`'s plain loops, not LAPACK (see there: batched LAPACK calls can deadlock).
+    an eigendecomposition: it costs one small elimination per step. The algebra is
+    `_linalg`'s plain loops (Gauss-Jordan), not LAPACK (see there: batched LAPACK calls
+    can deadlock).
 
     **Returns:** `(theta, singular, inverse_diagonal)`, the last the diagonal of
     `gram^-1` (the standard errors of a least-squares estimate are
@@ -132,13 +134,16 @@ def solve_gram(gram, rhs):
     identity = jnp.eye(gram.shape[0], dtype=gram.dtype)
     scaled = gram / (d[:, None] * d[None, :])
     scaled = jnp.where(zero[:, None] | zero[None, :], identity, scaled)
-    plain, ok = _linalg.cholesky(scaled)
-    pivots = jnp.diagonal(plain)
-    singular = jnp.any(zero) | ~ok | (jnp.min(pivots) ** 2 <= 1e4 * eps)
     # the ridge in scaled variables: 1e-8 max(d)^2 / d_i^2 on the diagonal
-    ridged, _ = _linalg.cholesky(scaled + jnp.diag(1e-8 * (jnp.max(d) / d) ** 2))
-    factor = jnp.where(singular, ridged, plain)
-    factor = jnp.where(jnp.all(jnp.isfinite(factor)), factor, identity)
+    ridged = scaled + jnp.diag(1e-8 * (jnp.max(d) / d) ** 2)
     rhs = jnp.where(zero, 0.0, rhs)
-    theta = _linalg.cho_solve(factor, rhs / d) / d
-    return theta, singular, _linalg.inverse_diagonal(factor) / d**2
+    # both systems in one loop, solution and inverse together (`_linalg.gauss_jordan`:
+    # its pivots are the squared diagonal of the Cholesky factor)
+    augmented = jnp.concatenate([(rhs / d)[:, None], identity], axis=1)
+    (plain, regular), (pivots, _) = jax.vmap(_linalg.gauss_jordan, (0, None))(
+        jnp.stack([scaled, ridged]), augmented
+    )
+    singular = jnp.any(zero) | ~_linalg.positive(pivots) | (jnp.min(pivots) <= 1e4 * eps)
+    solution = jnp.where(singular, regular, plain)
+    solution = jnp.where(jnp.all(jnp.isfinite(solution)), solution, augmented)
+    return solution[:, 0] / d, singular, jnp.diagonal(solution[:, 1:]) / d**2

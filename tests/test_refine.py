@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import jaxcascade as jc
-from jaxcascade._estimator._refine import from_unconstrained, to_unconstrained
+from jaxcascade._estimator._refine import _chain, from_unconstrained, to_unconstrained
 
 
 @pytest.mark.parametrize("orders", [jc.Orders(), jc.Orders(3, 2, 3, 3), jc.Orders(1, 1, 1, 0)])
@@ -41,3 +41,11 @@ def test_running_out_of_steps_is_max_iterations():
     done = refine(truth, u, y, max_steps=50)
     assert int(done.status) == int(jc.Status.converged)
     assert float(done.cost) < 1e-20
+
+
+@pytest.mark.parametrize("orders", [jc.Orders(), jc.Orders(3, 2, 3, 3), jc.Orders(1, 1, 1, 0)])
+def test_chain_is_the_jacobian_of_the_map(orders):
+    # Levenberg-Marquardt's chain rule is written out (`_chain`); jacfwd is the oracle
+    z = jnp.asarray(np.random.default_rng(1).normal(size=orders.size))
+    expected = jax.jacfwd(lambda z: from_unconstrained(z, orders, -1.7, 1.9).to_vector())(z)
+    np.testing.assert_allclose(_chain(z, orders, -1.7, 1.9), expected, rtol=1e-12, atol=1e-14)

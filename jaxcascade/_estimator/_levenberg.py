@@ -4,7 +4,8 @@ Why not optimistix's: the robust estimator runs thousands of small problems (P ~
 side by side under `vmap`, and each of its steps needs only the Gauss-Newton normal
 equations `J^T J`, `J^T r`, which `_sensitivity` forms without materialising a
 Jacobian-vector product per parameter. The linear algebra is `_linalg`'s plain-loop
-Cholesky: batched LAPACK calls deadlock XLA's CPU thread pool in this jaxlib.
+Gauss-Jordan solve (`spd_solve`, one loop): batched LAPACK calls deadlock XLA's CPU
+thread pool in this jaxlib.
 
 The algorithm (Marquardt 1963 with Nielsen's damping update, as in Madsen, Nielsen and
 Tingleff, "Methods for non-linear least squares problems", 2004, sec. 3.2): the step
@@ -36,7 +37,7 @@ from collections.abc import Callable
 import jax
 import jax.numpy as jnp
 
-from .._linalg import cho_solve, cholesky
+from .._linalg import spd_solve
 from .._status import Status
 
 _RUNNING = -1
@@ -55,8 +56,9 @@ def levenberg_marquardt(
     residual (`" T"`) and `JtJ` (`"P P"`), `Jtr` (`" P"`) its Gauss-Newton normal
     equations. Never raises.
 
-    **Returns:** `(z, cost, status, steps)`: the estimate, its mean squared residual
-    (`inf` if non-finite), a `Status` code and the number of steps taken.
+    **Returns:** `(z, cost, status, steps, r)`: the estimate, its mean squared residual
+    (`inf` if non-finite), a `Status` code, the number of steps taken and the residual
+    at the estimate.
     """
     dtype = z0.dtype
 
@@ -69,9 +71,9 @@ def levenberg_marquardt(
         z, r, cost, JtJ, Jtr, lam, nu, step, status = state
         diagonal = jnp.diag(JtJ)
         scale = jnp.maximum(diagonal, 1e-12 * jnp.max(diagonal) + jnp.finfo(dtype).tiny)
-        factor, factored = cholesky(JtJ + lam * jnp.diag(scale))
+        solution, factored = spd_solve(JtJ + lam * jnp.diag(scale), Jtr)
         first = step == 0
-        delta = jnp.where(first, 0.0, -cho_solve(factor, Jtr))
+        delta = jnp.where(first, 0.0, -solution)
         z_new = z + delta
         r_new, JtJ_new, Jtr_new = evaluate(z_new)
         cost_new = r_new @ r_new
@@ -127,4 +129,4 @@ def levenberg_marquardt(
     steps = jnp.maximum(steps - 1, 0)
     status = jnp.where(status == _RUNNING, Status.max_iterations, status).astype(jnp.int32)
     mean = cost / r.shape[0]
-    return z, jnp.where(jnp.isfinite(mean), mean, jnp.inf), status, steps
+    return z, jnp.where(jnp.isfinite(mean), mean, jnp.inf), status, steps, r

@@ -104,6 +104,7 @@ class Refined(eqx.Module):
     cost: Float[Array, ""]  # mean squared simulation error
     status: Array
     steps: Array
+    residual: Float[Array, " T"]  # the simulation error at `params`
 
 
 def least_squares(residual, z0, args, *, max_steps: int = 100, rtol=1e-8, atol=1e-10):
@@ -153,17 +154,50 @@ def least_squares(residual, z0, args, *, max_steps: int = 100, rtol=1e-8, atol=1
     )
 
 
+def _breakpoints_jacobian(z, bound):
+    # d/dz_k of bound * cumsum(softmax([z, 0]))[i]: bound s_k ([k <= i] - c_i)
+    fractions = jax.nn.softmax(jnp.concatenate([z, jnp.zeros((1,), z.dtype)]))[:-1]
+    cumulative = jnp.cumsum(fractions)
+    lower = jnp.tril(jnp.ones((z.shape[0], z.shape[0]), z.dtype))
+    return bound * fractions[None, :] * (lower - cumulative[:, None])
+
+
+def _chain(z, orders: Orders, u_min, u_max):
+    """`d from_unconstrained(z).to_vector() / dz`, written out: block diagonal, every
+    block but the breakpoints' and the poles' diagonal. (`jax.jacfwd` of the map gives
+    the same matrix; it pushes P tangents through the whole map at every call site of
+    Levenberg-Marquardt, which costs compile time.)"""
+    s = orders.slices
+    dtype = z.dtype
+    if orders.p:
+        poles = jax.jacfwd(lambda k: _step_up(_REFLECTION_LIMIT * jnp.tanh(k)))(z[s["b"]])
+    else:
+        poles = jnp.zeros((0, 0), dtype)
+    blocks = {
+        "DR": _breakpoints_jacobian(z[s["DR"]], u_max),
+        "DL": _breakpoints_jacobian(z[s["DL"]], u_min),
+        "b": poles,
+    }
+    diagonal = jnp.ones_like(z)
+    diagonal = diagonal.at[s["cL"]].set(jax.nn.sigmoid(z[s["cL"]]))
+    diagonal = diagonal.at[s["mR"]].set(jnp.exp(z[s["mR"]]))
+    diagonal = diagonal.at[s["cR"]].set(jax.nn.sigmoid(z[s["cR"]]))
+    for name in blocks:
+        diagonal = diagonal.at[s[name]].set(0.0)
+    chain = jnp.diag(diagonal)
+    for name, block in blocks.items():
+        if block.size:
+            chain = chain.at[s[name], s[name]].set(block.astype(dtype))
+    return chain
+
+
 def normal_equations(z, orders: Orders, u, y, u_min, u_max):
     """`(r, JtJ, Jtr)` of the simulation error at the unconstrained `z`: the Jacobian with
     respect to the parameters by forward sensitivities (`_sensitivity`), chained with
-    the small Jacobian of `from_unconstrained`."""
+    the small Jacobian of `from_unconstrained` (`_chain`)."""
 
-    def vector(z):
-        value = from_unconstrained(z, orders, u_min, u_max).to_vector()
-        return value, value
-
-    chain, value = jax.jacfwd(vector, has_aux=True)(z)  # one trace of the map, not two
-    params = CascadeParams.from_vector(value, orders, check=False)
+    params = from_unconstrained(z, orders, u_min, u_max)
+    chain = _chain(z, orders, u_min, u_max)
     y_sim, J = output_jacobian(params, u)
     J = J @ chain
     r = y_sim - y
@@ -184,7 +218,7 @@ def refine(
     orders = init.orders
     u_min, u_max = jnp.min(u), jnp.max(u)
     z0 = to_unconstrained(init.astype(u.dtype), u_min, u_max)
-    z, cost, status, steps = levenberg_marquardt(
+    z, cost, status, steps, residual = levenberg_marquardt(
         lambda z: normal_equations(z, orders, u, y, u_min, u_max),
         z0,
         max_steps=max_steps,
@@ -192,5 +226,9 @@ def refine(
         atol=atol,
     )
     return Refined(
-        params=from_unconstrained(z, orders, u_min, u_max), cost=cost, status=status, steps=steps
+        params=from_unconstrained(z, orders, u_min, u_max),
+        cost=cost,
+        status=status,
+        steps=steps,
+        residual=residual,
     )

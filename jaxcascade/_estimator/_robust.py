@@ -15,7 +15,7 @@ simulation-error landscape is friendlier (METHOD.md). This estimator
    23 random-family fits not within 0.05 of the truth, 21 gave 24 or more, two 2.3 and
    4.5 (accepted, not recovered);
 2. otherwise (`PATH_MULTISTART`) it draws `n_starts` initial values from the random-
-   system prior (`_prior.py`, with the breakpoints scaled to the record's input range),
+   system prior (`_prior.random_systems`, with the breakpoints scaled to the record's input range),
    adds the estimate of step 1 as one more start (`literal_start`), refines every start
    on the simulation error of the first `subset` samples (`vmap` over starts), keeps the
    `n_refine` best by simulation error on the whole record and refines them on the
@@ -47,6 +47,7 @@ result is never NaN; a start that fails is simply outranked.
 from __future__ import annotations
 
 import functools
+import inspect
 from typing import ClassVar
 
 import equinox as eqx
@@ -56,7 +57,7 @@ from jax.custom_batching import custom_vmap
 from jaxtyping import Array, Float, PRNGKeyArray
 
 from .._model import CascadeParams, Orders, is_admissible
-from .._prior import random_system
+from .._prior import random_systems
 from .._status import Status
 from .._validate import record
 from ._base import Estimator, setting
@@ -73,22 +74,6 @@ def _best(costs, k):
 
 def _take(tree, index):
     return jax.tree_util.tree_map(lambda leaf: leaf[index], tree)
-
-
-_STATIC = (
-    "orders",
-    "n_starts",
-    "n_refine",
-    "subset",
-    "max_steps",
-    "literal_start",
-    "rtol",
-    "atol",
-    "adaptive",
-    "threshold",
-    "adaptive_steps",
-    "fallback_batch",
-)
 
 
 def robust(
@@ -165,6 +150,14 @@ def robust(
     )
 
 
+# `robust`'s keyword defaults: the one place they are written (`_robust`, `Robust`)
+DEFAULTS = {
+    name: parameter.default
+    for name, parameter in inspect.signature(robust).parameters.items()
+    if parameter.kind is inspect.Parameter.KEYWORD_ONLY
+}
+
+
 class _Stage(eqx.Module):
     # what step 1 hands on: its fit and whether it is accepted
     solution: Solution
@@ -173,26 +166,31 @@ class _Stage(eqx.Module):
     usable: Array  # whether that estimate comes from a usable literal fit
 
 
-@functools.partial(jax.jit, static_argnames=_STATIC)
-def _robust(
+def _robust(u, y, orders: Orders, key: PRNGKeyArray | None = None, **settings) -> Solution:
+    """The jitted core of `robust`, which checks the record first; a setting not given
+    takes `robust`'s default."""
+    return _core(u, y, orders, key, **{**DEFAULTS, **settings})
+
+
+@functools.partial(jax.jit, static_argnames=("orders", *DEFAULTS))
+def _core(
     u: Float[Array, " T"],
     y: Float[Array, " T"],
     orders: Orders,
-    key: PRNGKeyArray | None = None,
+    key: PRNGKeyArray | None,
     *,
-    n_starts: int = 16,
-    n_refine: int = 3,
-    subset: int = 1000,
-    max_steps: tuple[int, int] = (30, 100),
-    literal_start: bool = True,
-    rtol: float = 1e-6,
-    atol: float = 1e-9,
-    adaptive: bool = True,
-    threshold: float = 5.0,
-    adaptive_steps: int = 50,
-    fallback_batch: int = 8,
+    n_starts: int,
+    n_refine: int,
+    subset: int,
+    max_steps: tuple[int, int],
+    literal_start: bool,
+    rtol: float,
+    atol: float,
+    adaptive: bool,
+    threshold: float,
+    adaptive_steps: int,
+    fallback_batch: int,
 ) -> Solution:
-    # The jitted core of `robust`, which checks the record first.
     dtype = u.dtype
     y = y.astype(dtype)
     key = jax.random.PRNGKey(0) if key is None else key
@@ -233,7 +231,7 @@ def _adaptive(u, y, orders, *, rtol, atol, steps, bound) -> _Stage:
         rtol=rtol,
         atol=atol,
     )
-    statistic = residual_statistic(simulation_error(fit.params, u, y), u)
+    statistic = residual_statistic(fit.residual, u)
     estimate = fit.params.to_vector()
     # the start is an estimate (the literal one, or the paper's initial values): a fit
     # that stays there is not stuck at a random draw
@@ -320,10 +318,8 @@ def _multistart(
     dtype = u.dtype
     tolerances = {"rtol": rtol, "atol": atol}
     u_max = 0.5 * (jnp.max(u) - jnp.min(u))
-    starts = jax.vmap(lambda k: random_system(k, orders, 1.0, dtype))(
-        jax.random.split(key, n_starts)
-    )
-    starts = starts.to_vector().at[:, jnp.array(orders.breakpoints, int)].multiply(u_max)
+    starts = random_systems(key, n_starts, orders, 1.0, dtype).to_vector()
+    starts = starts.at[:, jnp.array(orders.breakpoints, int)].multiply(u_max)
     if literal_start:
         starts = jnp.concatenate([starts, stage.start[None].astype(dtype)])
     starts = CascadeParams.from_vector(starts, orders, check=False)
@@ -411,17 +407,17 @@ class Robust(Estimator):
         "output-error Levenberg-Marquardt from the literal estimate, multi-start fallback"
     )
 
-    n_starts: int = setting(16)
-    n_refine: int = setting(3)
-    subset: int = setting(1000)
-    max_steps: tuple[int, int] = setting((30, 100))
-    literal_start: bool = setting(True)
-    rtol: float = setting(1e-6)
-    atol: float = setting(1e-9)
-    adaptive: bool = setting(True)
-    threshold: float = setting(5.0)
-    adaptive_steps: int = setting(50)
-    fallback_batch: int = setting(8)
+    n_starts: int = setting(DEFAULTS["n_starts"])
+    n_refine: int = setting(DEFAULTS["n_refine"])
+    subset: int = setting(DEFAULTS["subset"])
+    max_steps: tuple[int, int] = setting(DEFAULTS["max_steps"])
+    literal_start: bool = setting(DEFAULTS["literal_start"])
+    rtol: float = setting(DEFAULTS["rtol"])
+    atol: float = setting(DEFAULTS["atol"])
+    adaptive: bool = setting(DEFAULTS["adaptive"])
+    threshold: float = setting(DEFAULTS["threshold"])
+    adaptive_steps: int = setting(DEFAULTS["adaptive_steps"])
+    fallback_batch: int = setting(DEFAULTS["fallback_batch"])
 
     def __call__(
         self,
@@ -434,20 +430,4 @@ class Robust(Estimator):
     ) -> Solution:
         del input_range  # the starts are scaled to the record's own range
         u, y = record(u, y, orders=orders, where="Robust")
-        return robust(
-            u,
-            y,
-            orders,
-            key,
-            n_starts=self.n_starts,
-            n_refine=self.n_refine,
-            subset=self.subset,
-            max_steps=self.max_steps,
-            literal_start=self.literal_start,
-            rtol=self.rtol,
-            atol=self.atol,
-            adaptive=self.adaptive,
-            threshold=self.threshold,
-            adaptive_steps=self.adaptive_steps,
-            fallback_batch=self.fallback_batch,
-        )
+        return robust(u, y, orders, key, **{name: getattr(self, name) for name in DEFAULTS})
