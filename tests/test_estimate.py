@@ -162,6 +162,10 @@ def test_a_period_10_cycle_is_a_cycle_not_max_iterations():
     assert np.max(np.abs(sol.params.to_vector() - truth.to_vector())) < 0.05
     short = jaxcascade.voros(u, y, truth.orders, init, cycle_period=8)
     assert short.status == Status.max_iterations
+    # 0 or 1: no cycle detection at all
+    for off in (0, 1):
+        none = jaxcascade.voros(u, y, truth.orders, init, cycle_period=off)
+        assert none.status == Status.max_iterations and float(none.cycle_amplitude) == 0.0
 
 
 def test_statistical_tolerance_stops_at_the_precision():

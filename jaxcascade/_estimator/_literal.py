@@ -311,7 +311,7 @@ def _voros(
         converged = converged | ((cost_tol >= 0) & settled)
         # Iterate k + 1 against iterates k + 1 - j, j = 2..cycle_period (row 0, the
         # initial values, is no iterate of the map).
-        periods = jnp.arange(2, max(cycle_period, 1) + 1)
+        periods = jnp.arange(2, max(cycle_period, 2) + 1)  # 0 or 1: masked below
         earlier = jnp.clip(k + 1 - periods, 0, max_iterations)
         close = jnp.all(jnp.abs(theta_new - _theta(history[earlier])) <= tolerance, axis=1)
         close = close & (k + 1 - periods >= 1) & (cycle_period >= 2)
