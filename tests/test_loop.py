@@ -44,6 +44,25 @@ def test_loop_names_the_undeclared_effect(effect):
     assert all(np.isfinite(c["error"]) for c in report["candidates"])
 
 
+def test_loop_names_strongly_coloured_noise_on_the_prediction_error():
+    # Issue 15, item 6: AR(1) output noise with pole 0.95 and nothing else undeclared.
+    # The noise model leaves the simulation error as it is; it is judged, and named, on
+    # the one-step-ahead prediction error (floor 0.05 sqrt(1 - 0.95^2) = 0.016).
+    model = plain(TRUTH())
+    u, y = undeclared_record(model, jax.random.PRNGKey(1), N, SNR, 0.95)
+    u_val, y_val = undeclared_record(model, jax.random.PRNGKey(2), N, SNR, 0.95)
+    result = model_error_loop(u, y, u_val, y_val, jc.Orders())
+    assert result.added == ["colored_noise"]
+    report = result.to_dict()
+    assert report["effect_added"] == ["colored_noise"]
+    assert report["error_after"] == report["error_before"]
+    assert report["prediction_error_after"] < 0.5 * report["prediction_error_before"]
+    (noise,) = [c for c in report["candidates"] if c["name"] == "colored_noise"]
+    assert noise["significant"] and noise["loss"] == "prediction" and noise["t"] > 3
+    assert report["significance"]["test"] == "Diebold-Mariano"
+    assert result.after.tests.whiteness_ok  # the tests after it see the whitened residual
+
+
 def test_every_effect_declares_a_signature():
     tests = {
         "autocorrelation",
