@@ -104,6 +104,17 @@ def test_innovations_invert_an_ar_filter():
     np.testing.assert_allclose(noise.innovations(jnp.asarray(coloured)), e, atol=1e-12)
 
 
+def test_noise_fitted_on_several_records():
+    # One set of AR coefficients from two records, each record's lags from its own samples.
+    rng = np.random.default_rng(5)
+    records = [scipy.signal.lfilter([1.0], [1.0, -0.8], rng.normal(size=3000)) for _ in range(2)]
+    noise, p_value = ARNoise.fit_records(records)
+    assert noise.order >= 1 and p_value < 1e-6
+    assert noise.coefficients[0] == pytest.approx(0.8, abs=0.03)
+    white, p_white = ARNoise.fit_records([rng.normal(size=3000), rng.normal(size=3000)])
+    assert white.order == 0 and p_white == 1.0
+
+
 def test_paired_improvement_sign():
     rng = np.random.default_rng(0)
     noise = rng.normal(size=2000)
