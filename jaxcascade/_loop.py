@@ -85,8 +85,13 @@ def _refit(vectors, new: Effect, current: ExtendedModel, us, ys, orders: Orders,
             return ExtendedModel(params, tuple(effects), current.noise)
 
         def residual(z, args):
+            # With a noise model the fit minimises the one-step prediction error (its
+            # innovation; the simulation error itself for white noise).
             model = unpack(z)
-            parts = [simulate_with_switches(model, v)[0] - w for v, w in zip(us, ys, strict=True)]
+            parts = [
+                model.noise.innovations(simulate_with_switches(model, v)[0] - w)
+                for v, w in zip(us, ys, strict=True)
+            ]
             return jnp.concatenate(parts)
 
         z, cost, status, _ = least_squares(residual, z0, None, max_steps=max_steps)
@@ -417,6 +422,8 @@ def model_error_loop(
                 current,
                 failed,
                 round_,
+                us,
+                ys,
                 records,
                 assess,
                 t_threshold=t_threshold,
@@ -487,11 +494,16 @@ def _candidate(name, model, current, failed, round_, us, ys, records, assess, **
     )
 
 
-def _noise_candidate(model, current, failed, round_, records, assess, **options):
+def _noise_candidate(model, current, failed, round_, us, ys, records, assess, **options):
     """The autoregressive noise model fitted on the estimation records' residuals of
-    `model`, judged on the validation record's one-step-ahead prediction error."""
+    `model`, the model then refitted on the prediction error it defines (an output-error
+    fit is biased by coloured noise, and the whitened residual shows that bias to the
+    input tests), judged on the validation record's one-step-ahead prediction error."""
     noise, p_value = ARNoise.fit_records([r[2] for r in records])
     noise_model = ExtendedModel(model.params, model.effects, noise)
+    if noise.order:
+        refitted, _, _ = refit(noise_model, _no_effect(model.params), us, ys)
+        noise_model = ExtendedModel(refitted.params, refitted.effects[:-1], noise)
     evaluation = assess(noise_model)
     comparison = diebold_mariano(current.innovation, evaluation.innovation, "prediction")
     gain = 1 - evaluation.prediction_error / current.prediction_error

@@ -46,8 +46,9 @@ def test_loop_names_the_undeclared_effect(effect):
 
 def test_loop_names_strongly_coloured_noise_on_the_prediction_error():
     # Issue 15, item 6: AR(1) output noise with pole 0.95 and nothing else undeclared.
-    # The noise model leaves the simulation error as it is; it is judged, and named, on
-    # the one-step-ahead prediction error (floor 0.05 sqrt(1 - 0.95^2) = 0.016).
+    # The noise model leaves the simulation error at the noise floor (the cascade is
+    # refitted on the prediction error it defines); it is judged, and named, on the
+    # one-step-ahead prediction error (floor 0.05 sqrt(1 - 0.95^2) = 0.016).
     model = plain(TRUTH())
     u, y = undeclared_record(model, jax.random.PRNGKey(1), N, SNR, 0.95)
     u_val, y_val = undeclared_record(model, jax.random.PRNGKey(2), N, SNR, 0.95)
@@ -55,7 +56,7 @@ def test_loop_names_strongly_coloured_noise_on_the_prediction_error():
     assert result.added == ["colored_noise"]
     report = result.to_dict()
     assert report["effect_added"] == ["colored_noise"]
-    assert report["error_after"] == report["error_before"]
+    assert report["error_after"] <= 1.5 / SNR
     assert report["prediction_error_after"] < 0.5 * report["prediction_error_before"]
     (noise,) = [c for c in report["candidates"] if c["name"] == "colored_noise"]
     assert noise["significant"] and noise["loss"] == "prediction" and noise["t"] > 3
@@ -118,8 +119,9 @@ def test_noise_fitted_on_several_records():
 def test_paired_improvement_sign():
     rng = np.random.default_rng(0)
     noise = rng.normal(size=2000)
-    assert paired_improvement(noise + 0.5, noise) > 10
-    assert paired_improvement(noise, noise + 0.5) < -10
+    # d = noise + 0.25, white: the statistic is about 0.25 sqrt(2000) = 11.
+    assert paired_improvement(noise + 0.5, noise) > 8
+    assert paired_improvement(noise, noise + 0.5) < -8
     assert abs(paired_improvement(noise, rng.normal(size=2000))) < 4
 
 
