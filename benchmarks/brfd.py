@@ -135,7 +135,7 @@ def main(argv=None) -> int:
                 {
                     "run": run,
                     "validation": valid,
-                    "model": f"candidate (round {c['round']}, t {c['t']:.2f}, {verdict}): "
+                    "model": f"candidate (round {c['round']}, DM {c['t']:.2f}, {verdict}): "
                     + c["variant"],
                     "nrmse": c["error"],
                     "window_nrmse": c.get("window_error"),

@@ -5,16 +5,24 @@
 3. If every test passes, stop: nothing is invented.
 4. Otherwise refit the model with each effect of the library added (`_effects`), from
    the current estimate, and score each on the validation record: its NRMSE, and a
-   paired test that its squared errors are smaller than the current model's. An effect
+   Diebold-Mariano test that its squared simulation errors are smaller than the
+   current model's (`_significance`: Newey-West variance, Andrews' bandwidth), since
+   the two error series are paired and autocorrelated. An effect
    marked `needs_signature` (the hysteresis effects) is tried only when a test of its
    signature failed: never on a record whose hysteresis test passes. A parallel path
    linear in its weights (`Effect.linear`) is fitted by ridge least squares on the
    residual, alternating with refits of the cascade (`fit_parallel`); the others by an
    output-error Levenberg-Marquardt refit of the extended model (`refit`).
 5. Among the significant candidates, those whose residual signature matches a failed
-   test rank first, then by validation NRMSE; the best is added. A coloured residual
-   that no deterministic effect explains, with the input tests passing, gets the
-   autoregressive noise model if its likelihood-ratio test is significant.
+   test rank first, then by validation NRMSE; the best is added.
+   The noise model cannot lower the simulation error, so it is judged on the one-step-
+   ahead prediction error instead (the innovation `w` of `_noise.ARNoise`; before it,
+   the simulation error itself): fitted on the estimation records' residuals, it is
+   significant when the Diebold-Mariano test of the squared prediction errors on the
+   validation record exceeds the same threshold with the same relative gain. A coloured
+   residual that no deterministic effect explains gets it when it is significant and
+   its whitened residual passes the whiteness and input tests; the residual tests after
+   it see the whitened residual.
 6. Repeat from 2 while an effect was added (at most `max_effects`).
 """
 
@@ -36,6 +44,7 @@ from ._estimator._robust import Robust
 from ._metrics import score
 from ._model import CascadeParams, Orders
 from ._noise import ARNoise
+from ._significance import BANDWIDTH_RULE, TEST_NAME, VARIANCE, Comparison, diebold_mariano
 from ._simulate import backlash_switches, shift
 from ._validate import record
 
@@ -76,8 +85,13 @@ def _refit(vectors, new: Effect, current: ExtendedModel, us, ys, orders: Orders,
             return ExtendedModel(params, tuple(effects), current.noise)
 
         def residual(z, args):
+            # With a noise model the fit minimises the one-step prediction error (its
+            # innovation; the simulation error itself for white noise).
             model = unpack(z)
-            parts = [simulate_with_switches(model, v)[0] - w for v, w in zip(us, ys, strict=True)]
+            parts = [
+                model.noise.innovations(simulate_with_switches(model, v)[0] - w)
+                for v, w in zip(us, ys, strict=True)
+            ]
             return jnp.concatenate(parts)
 
         z, cost, status, _ = least_squares(residual, z0, None, max_steps=max_steps)
@@ -168,13 +182,18 @@ def model_standard_errors(model: ExtendedModel, u, y) -> dict[str, float]:
 
 @dataclasses.dataclass
 class Evaluation:
-    """A model on the validation record: residual, NRMSE and residual tests."""
+    """A model on the validation record: the simulation residual and its NRMSE (`error`),
+    the one-step-ahead prediction error (`innovation`, the residual whitened by the
+    model's noise model; the residual itself with white noise) and its NRMSE
+    (`prediction_error`), and the residual tests (on the innovation)."""
 
     residual: np.ndarray
     simulated: np.ndarray
     error: float
     tests: ResidualTests
     window_error: float | None = None
+    innovation: np.ndarray | None = None
+    prediction_error: float | None = None
 
 
 def evaluate(
@@ -192,25 +211,21 @@ def evaluate(
     error = score(y, y_sim)
     tests = residual_tests(u, innovations, regime, sample_period=sample_period)
     window_error = None if window is None else score(y[slice(*window)], y_sim[slice(*window)])
-    return Evaluation(residual, y_sim, error, tests, window_error)
+    prediction_error = score(y, y - innovations)
+    return Evaluation(residual, y_sim, error, tests, window_error, innovations, prediction_error)
 
 
 def paired_improvement(current: np.ndarray, new: np.ndarray) -> float:
-    """t statistic that `new` has smaller squared errors than `current` (paired, with the
-    effective sample size corrected for lag-1 autocorrelation of the differences)."""
-    d = current**2 - new**2
-    n = len(d)
-    sd = np.std(d)
-    if not np.isfinite(sd) or sd == 0:
-        return 0.0 if np.mean(d) <= 0 else np.inf
-    dc = d - np.mean(d)
-    rho = float(np.clip(np.sum(dc[1:] * dc[:-1]) / np.sum(dc**2), -0.9, 0.99))
-    n_eff = n * (1 - rho) / (1 + rho)
-    return float(np.mean(d) / (sd / np.sqrt(n_eff)))
+    """Diebold-Mariano statistic that `new` has smaller squared errors than `current`
+    (`_significance.diebold_mariano`: Newey-West variance, Andrews' bandwidth)."""
+    return diebold_mariano(current, new).statistic
 
 
 @dataclasses.dataclass
 class Candidate:
+    """One effect tried in one round. `t` is the Diebold-Mariano statistic of
+    `comparison` (simulation loss for an effect, prediction loss for the noise model)."""
+
     round: int
     name: str
     label: str
@@ -220,17 +235,23 @@ class Candidate:
     signature_match: bool
     model: ExtendedModel | None = None
     evaluation: Evaluation | None = None
+    comparison: Comparison | None = None
 
     def to_dict(self) -> dict:
+        e, c = self.evaluation, self.comparison
         return {
             "round": self.round,
             "name": self.name,
             "variant": self.label,
             "error": self.error,
+            "prediction_error": None if e is None else e.prediction_error,
             "t": self.t,
+            "loss": None if c is None else c.loss,
+            "bandwidth": None if c is None else c.bandwidth,
+            "p_value": None if c is None else c.p_value,
             "significant": self.significant,
             "signature_match": self.signature_match,
-            "window_error": None if self.evaluation is None else self.evaluation.window_error,
+            "window_error": None if e is None else e.window_error,
         }
 
 
@@ -243,6 +264,8 @@ class LoopResult:
     added: list[str]
     candidates: list[Candidate]
     steps: list[tuple[str, ExtendedModel, Evaluation]] = dataclasses.field(default_factory=list)
+    t_threshold: float = 3.0
+    min_gain: float = 0.02
 
     def to_dict(self) -> dict:
         def params(model):
@@ -256,11 +279,27 @@ class LoopResult:
         return {
             "error_before": self.before.error,
             "error_after": self.after.error,
+            "prediction_error_before": self.before.prediction_error,
+            "prediction_error_after": self.after.prediction_error,
             "window_error_before": self.before.window_error,
             "window_error_after": self.after.window_error,
             "effect_added": list(self.added),
+            "significance": {
+                "test": TEST_NAME,
+                "statistic": "DM = mean(d) / sqrt(S / N), d = e_current^2 - e_candidate^2",
+                "variance": VARIANCE,
+                "bandwidth_rule": BANDWIDTH_RULE,
+                "threshold": self.t_threshold,
+                "min_gain": self.min_gain,
+                "loss": {"effects": "simulation", ARNoise.name: "prediction"},
+            },
             "steps": [
-                {"model": label, "error": e.error, "window_error": e.window_error}
+                {
+                    "model": label,
+                    "error": e.error,
+                    "prediction_error": e.prediction_error,
+                    "window_error": e.window_error,
+                }
                 for label, _, e in self.steps
             ],
             "candidates": [
@@ -303,10 +342,12 @@ def model_error_loop(
       records joined end to end, then refined on each).
     - `orders`: declared orders of the cascade.
     - `base`: a fitted cascade to start from; by default the robust estimator fits one.
-    - `t_threshold`, `min_gain`: a candidate is significant when its paired t statistic
-      exceeds `t_threshold` and it lowers the validation NRMSE by at least `min_gain`
-      (relative).
-    - `noise_alpha`: level of the likelihood-ratio test for the noise model.
+    - `t_threshold`, `min_gain`: a candidate is significant when its Diebold-Mariano
+      statistic (`_significance`) exceeds `t_threshold` and it lowers the validation NRMSE
+      by at least `min_gain` (relative): the simulation NRMSE for an effect, the one-step
+      prediction NRMSE for the noise model.
+    - `noise_alpha`: level of the likelihood-ratio test of the noise model against white
+      noise on the estimation records (a further condition for it).
     - `effects`: names of the library to consider (default: all).
     - `window`: `(start, stop)` samples of the validation record also scored
       (`Evaluation.window_error`).
@@ -376,21 +417,23 @@ def model_error_loop(
                 f"{'significant' if c.significant else ''}"
             )
         if ARNoise.name in names and ARNoise.name not in added:
-            noise, p_value = ARNoise.fit(current.residual)
-            noise_model = ExtendedModel(model.params, model.effects, noise)
-            evaluation = assess(noise_model)
-            round_candidates.append(
-                Candidate(
-                    round_,
-                    ARNoise.name,
-                    f"{ARNoise.name}:AR({noise.order})",
-                    evaluation.error,
-                    0.0,
-                    bool(p_value < noise_alpha and noise.order),
-                    bool(failed & set(ARNoise.signature)),
-                    noise_model,
-                    evaluation,
-                )
+            c = _noise_candidate(
+                model,
+                current,
+                failed,
+                round_,
+                us,
+                ys,
+                records,
+                assess,
+                t_threshold=t_threshold,
+                min_gain=min_gain,
+                noise_alpha=noise_alpha,
+            )
+            round_candidates.append(c)
+            say(
+                f"  {c.label:<24} prediction error {c.evaluation.prediction_error:.4g}  "
+                f"t {c.t:7.2f}  {'significant' if c.significant else ''}"
             )
         candidates += round_candidates
         deterministic = [c for c in round_candidates if c.significant and c.name != ARNoise.name]
@@ -416,7 +459,9 @@ def model_error_loop(
         added.append(chosen.name)
         model, current = chosen.model, chosen.evaluation
         steps.append((f"+ {chosen.label}", model, current))
-    return LoopResult(before, current, plain(base), model, added, candidates, steps)
+    return LoopResult(
+        before, current, plain(base), model, added, candidates, steps, t_threshold, min_gain
+    )
 
 
 def _candidate(name, model, current, failed, round_, us, ys, records, assess, **options):
@@ -433,18 +478,52 @@ def _candidate(name, model, current, failed, round_, us, ys, records, assess, **
                 best = (fitted, cost, start.label)
         fitted, _, label = best
     evaluation = assess(fitted)
-    t = paired_improvement(current.residual, evaluation.residual)
+    comparison = diebold_mariano(current.residual, evaluation.residual, "simulation")
     gain = 1 - evaluation.error / current.error
     return Candidate(
         round_,
         name,
         label,
         evaluation.error,
-        t,
-        bool(t > t_threshold and gain > min_gain),
+        comparison.statistic,
+        bool(comparison.statistic > t_threshold and gain > min_gain),
         bool(failed & set(effect.signature)),
         fitted,
         evaluation,
+        comparison,
+    )
+
+
+def _noise_candidate(model, current, failed, round_, us, ys, records, assess, **options):
+    """The autoregressive noise model fitted on the estimation records' residuals of
+    `model`, the model then refitted on the prediction error it defines (an output-error
+    fit is biased by coloured noise, and the whitened residual shows that bias to the
+    input tests), judged on the validation record's one-step-ahead prediction error."""
+    noise, p_value = ARNoise.fit_records([r[2] for r in records])
+    noise_model = ExtendedModel(model.params, model.effects, noise)
+    if noise.order:
+        refitted, _, _ = refit(noise_model, _no_effect(model.params), us, ys)
+        noise_model = ExtendedModel(refitted.params, refitted.effects[:-1], noise)
+    evaluation = assess(noise_model)
+    comparison = diebold_mariano(current.innovation, evaluation.innovation, "prediction")
+    gain = 1 - evaluation.prediction_error / current.prediction_error
+    significant = (
+        noise.order > 0
+        and p_value < options["noise_alpha"]
+        and comparison.statistic > options["t_threshold"]
+        and gain > options["min_gain"]
+    )
+    return Candidate(
+        round_,
+        ARNoise.name,
+        f"{ARNoise.name}:AR({noise.order})",
+        evaluation.error,
+        comparison.statistic,
+        bool(significant),
+        bool(failed & set(ARNoise.signature)),
+        noise_model,
+        evaluation,
+        comparison,
     )
 
 

@@ -47,21 +47,32 @@ class ARNoise(eqx.Module):
     def fit(cls, residual, max_order: int | None = None) -> tuple[ARNoise, float]:
         """AR coefficients by least squares with the order chosen by BIC, and the p-value
         of the likelihood-ratio test against white noise (host side)."""
+        return cls.fit_records([residual], max_order)
+
+    @classmethod
+    def fit_records(cls, residuals, max_order: int | None = None) -> tuple[ARNoise, float]:
+        """`fit` on several records at once: one set of coefficients, each record's
+        regression built from its own samples only (no lag crosses a record's start)."""
         import scipy.stats
 
         max_order = cls.max_order if max_order is None else max_order
-        e = np.asarray(residual, dtype=float)
-        n = len(e)
-        best = (n * np.log(np.mean(e**2)), np.zeros(0), np.mean(e**2))
+        records = [np.asarray(e, dtype=float) for e in residuals]
+        n = sum(e.size for e in records)
+        power = sum(float(e @ e) for e in records) / n
+        best = (n * np.log(power), np.zeros(0), power)
         for q in range(1, max_order + 1):
-            X = np.stack([e[q - i : n - i] for i in range(1, q + 1)], axis=1)
-            c, *_ = np.linalg.lstsq(X, e[q:], rcond=None)
-            variance = np.mean((e[q:] - X @ c) ** 2)
+            usable = [e for e in records if e.size > q]
+            X = np.concatenate(
+                [np.stack([e[q - i : e.size - i] for i in range(1, q + 1)], 1) for e in usable]
+            )
+            target = np.concatenate([e[q:] for e in usable])
+            c, *_ = np.linalg.lstsq(X, target, rcond=None)
+            variance = np.mean((target - X @ c) ** 2)
             bic = n * np.log(variance) + q * np.log(n)
             if bic < best[0]:
                 best = (bic, c, variance)
         noise = cls(jnp.asarray(best[1]))
         if noise.order == 0:
             return noise, 1.0
-        statistic = n * np.log(np.mean(e**2) / best[2])
+        statistic = n * np.log(power / best[2])
         return noise, float(scipy.stats.chi2.sf(statistic, noise.order))

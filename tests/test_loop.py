@@ -44,6 +44,26 @@ def test_loop_names_the_undeclared_effect(effect):
     assert all(np.isfinite(c["error"]) for c in report["candidates"])
 
 
+def test_loop_names_strongly_coloured_noise_on_the_prediction_error():
+    # Issue 15, item 6: AR(1) output noise with pole 0.95 and nothing else undeclared.
+    # The noise model leaves the simulation error at the noise floor (the cascade is
+    # refitted on the prediction error it defines); it is judged, and named, on the
+    # one-step-ahead prediction error (floor 0.05 sqrt(1 - 0.95^2) = 0.016).
+    model = plain(TRUTH())
+    u, y = undeclared_record(model, jax.random.PRNGKey(1), N, SNR, 0.95)
+    u_val, y_val = undeclared_record(model, jax.random.PRNGKey(2), N, SNR, 0.95)
+    result = model_error_loop(u, y, u_val, y_val, jc.Orders())
+    assert result.added == ["colored_noise"]
+    report = result.to_dict()
+    assert report["effect_added"] == ["colored_noise"]
+    assert report["error_after"] <= 1.5 / SNR
+    assert report["prediction_error_after"] < 0.5 * report["prediction_error_before"]
+    (noise,) = [c for c in report["candidates"] if c["name"] == "colored_noise"]
+    assert noise["significant"] and noise["loss"] == "prediction" and noise["t"] > 3
+    assert report["significance"]["test"] == "Diebold-Mariano"
+    assert result.after.tests.whiteness_ok  # the tests after it see the whitened residual
+
+
 def test_every_effect_declares_a_signature():
     tests = {
         "autocorrelation",
@@ -85,11 +105,23 @@ def test_innovations_invert_an_ar_filter():
     np.testing.assert_allclose(noise.innovations(jnp.asarray(coloured)), e, atol=1e-12)
 
 
+def test_noise_fitted_on_several_records():
+    # One set of AR coefficients from two records, each record's lags from its own samples.
+    rng = np.random.default_rng(5)
+    records = [scipy.signal.lfilter([1.0], [1.0, -0.8], rng.normal(size=3000)) for _ in range(2)]
+    noise, p_value = ARNoise.fit_records(records)
+    assert noise.order >= 1 and p_value < 1e-6
+    assert noise.coefficients[0] == pytest.approx(0.8, abs=0.03)
+    white, p_white = ARNoise.fit_records([rng.normal(size=3000), rng.normal(size=3000)])
+    assert white.order == 0 and p_white == 1.0
+
+
 def test_paired_improvement_sign():
     rng = np.random.default_rng(0)
     noise = rng.normal(size=2000)
-    assert paired_improvement(noise + 0.5, noise) > 10
-    assert paired_improvement(noise, noise + 0.5) < -10
+    # d = noise + 0.25, white: the statistic is about 0.25 sqrt(2000) = 11.
+    assert paired_improvement(noise + 0.5, noise) > 8
+    assert paired_improvement(noise, noise + 0.5) < -8
     assert abs(paired_improvement(noise, rng.normal(size=2000))) < 4
 
 

@@ -41,17 +41,24 @@ def _markdown(report: dict, command: str) -> str:
         f"- validation NRMSE after: {report['error_after']:.4f} "
         f"(fit {fit_percent(report['error_after']):.1f} %)",
         f"- effects added: {', '.join(report['effect_added']) or 'none'}",
+        f"- one-step-ahead prediction NRMSE before: {report['prediction_error_before']:.4f}, "
+        f"after: {report['prediction_error_after']:.4f}",
     ]
     if report.get("window"):
         lines.append(
             f"- window {report['window']['stored']} (stored samples): NRMSE before "
             f"{report['window_error_before']:.4f}, after {report['window_error_after']:.4f}"
         )
-    lines += ["", "| model | NRMSE | window NRMSE |", "|---|---|---|"]
+    lines += [
+        "",
+        "| model | NRMSE | prediction NRMSE | window NRMSE |",
+        "|---|---|---|---|",
+    ]
     for step in report["steps"]:
         w = step["window_error"]
         lines.append(
-            f"| {step['model']} | {step['error']:.4f} | {'-' if w is None else f'{w:.4f}'} |"
+            f"| {step['model']} | {step['error']:.4f} | {step['prediction_error']:.4f} | "
+            f"{'-' if w is None else f'{w:.4f}'} |"
         )
     if "arx" in report:
         arx = report["arx"]
@@ -59,17 +66,26 @@ def _markdown(report: dict, command: str) -> str:
             f"- linear ARX peer (na={arx['na']}, nb={arx['nb']}): NRMSE {arx['error']:.4f} "
             f"(fit {fit_percent(arx['error']):.1f} %)"
         )
+    test = report["significance"]
     lines += [
         "",
         "## Candidates",
         "",
-        "| round | effect | variant | NRMSE | paired t | significant | signature matches |",
-        "|---|---|---|---|---|---|---|",
+        f"Significance: {test['test']} test of the squared errors against the current model "
+        f"({test['statistic']}), {test['variance']}, truncation lag L by {test['bandwidth_rule']}; "
+        f"significant when DM > {test['threshold']:g} and the NRMSE falls by more than "
+        f"{100 * test['min_gain']:g} %. Loss: the simulation error for an effect, the "
+        "one-step-ahead prediction error for the noise model.",
+        "",
+        "| round | effect | variant | NRMSE | prediction NRMSE | loss | DM | L | p | "
+        "significant | signature matches |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for c in report["candidates"]:
         lines.append(
-            f"| {c['round']} | {c['name']} | {c['variant']} | {c['error']:.4f} | {c['t']:.2f} | "
-            f"{c['significant']} | {c['signature_match']} |"
+            f"| {c['round']} | {c['name']} | {c['variant']} | {c['error']:.4f} | "
+            f"{c['prediction_error']:.4f} | {c['loss']} | {c['t']:.2f} | {c['bandwidth']} | "
+            f"{c['p_value']:.2g} | {c['significant']} | {c['signature_match']} |"
         )
     lines += [
         "",
@@ -174,7 +190,8 @@ def run_loop(args) -> int:
         "estimation": [r.to_dict() for r in training],
         "validation": validation.to_dict(),
     }
-    keys = ("error_before", "error_after", "effect_added", "candidates", "residual_tests")
+    keys = ("error_before", "error_after", "prediction_error_before", "prediction_error_after")
+    keys += ("effect_added", "significance", "candidates", "residual_tests")
     if window is not None:
         keys += ("window_error_before", "window_error_after")
     if args.json:
