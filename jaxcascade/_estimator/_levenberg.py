@@ -56,9 +56,8 @@ def levenberg_marquardt(
     residual (`" T"`) and `JtJ` (`"P P"`), `Jtr` (`" P"`) its Gauss-Newton normal
     equations. Never raises.
 
-    **Returns:** `(z, cost, status, steps, r)`: the estimate, its mean squared residual
-    (`inf` if non-finite), a `Status` code, the number of steps taken and the residual
-    at the estimate.
+    **Returns:** `(z, cost, status, steps)`: the estimate, its mean squared residual
+    (`inf` if non-finite), a `Status` code and the number of steps taken.
     """
     dtype = z0.dtype
 
@@ -129,4 +128,4 @@ def levenberg_marquardt(
     steps = jnp.maximum(steps - 1, 0)
     status = jnp.where(status == _RUNNING, Status.max_iterations, status).astype(jnp.int32)
     mean = cost / r.shape[0]
-    return z, jnp.where(jnp.isfinite(mean), mean, jnp.inf), status, steps, r
+    return z, jnp.where(jnp.isfinite(mean), mean, jnp.inf), status, steps

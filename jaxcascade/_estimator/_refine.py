@@ -104,7 +104,6 @@ class Refined(eqx.Module):
     cost: Float[Array, ""]  # mean squared simulation error
     status: Array
     steps: Array
-    residual: Float[Array, " T"]  # the simulation error at `params`
 
 
 def least_squares(residual, z0, args, *, max_steps: int = 100, rtol=1e-8, atol=1e-10):
@@ -182,7 +181,7 @@ def _chain(z, orders: Orders, u_min, u_max):
     diagonal = diagonal.at[s["cL"]].set(jax.nn.sigmoid(z[s["cL"]]))
     diagonal = diagonal.at[s["mR"]].set(jnp.exp(z[s["mR"]]))
     diagonal = diagonal.at[s["cR"]].set(jax.nn.sigmoid(z[s["cR"]]))
-    for name in blocks:
+    for name, block in blocks.items():
         diagonal = diagonal.at[s[name]].set(0.0)
     chain = jnp.diag(diagonal)
     for name, block in blocks.items():
@@ -218,7 +217,7 @@ def refine(
     orders = init.orders
     u_min, u_max = jnp.min(u), jnp.max(u)
     z0 = to_unconstrained(init.astype(u.dtype), u_min, u_max)
-    z, cost, status, steps, residual = levenberg_marquardt(
+    z, cost, status, steps = levenberg_marquardt(
         lambda z: normal_equations(z, orders, u, y, u_min, u_max),
         z0,
         max_steps=max_steps,
@@ -226,9 +225,5 @@ def refine(
         atol=atol,
     )
     return Refined(
-        params=from_unconstrained(z, orders, u_min, u_max),
-        cost=cost,
-        status=status,
-        steps=steps,
-        residual=residual,
+        params=from_unconstrained(z, orders, u_min, u_max), cost=cost, status=status, steps=steps
     )

@@ -15,7 +15,7 @@ simulation-error landscape is friendlier (METHOD.md). This estimator
    23 random-family fits not within 0.05 of the truth, 21 gave 24 or more, two 2.3 and
    4.5 (accepted, not recovered);
 2. otherwise (`PATH_MULTISTART`) it draws `n_starts` initial values from the random-
-   system prior (`_prior.random_systems`, with the breakpoints scaled to the record's input range),
+   system prior (`_prior.py`, with the breakpoints scaled to the record's input range),
    adds the estimate of step 1 as one more start (`literal_start`), refines every start
    on the simulation error of the first `subset` samples (`vmap` over starts), keeps the
    `n_refine` best by simulation error on the whole record and refines them on the
@@ -57,7 +57,7 @@ from jax.custom_batching import custom_vmap
 from jaxtyping import Array, Float, PRNGKeyArray
 
 from .._model import CascadeParams, Orders, is_admissible
-from .._prior import random_systems
+from .._prior import random_system
 from .._status import Status
 from .._validate import record
 from ._base import Estimator, setting
@@ -231,7 +231,7 @@ def _adaptive(u, y, orders, *, rtol, atol, steps, bound) -> _Stage:
         rtol=rtol,
         atol=atol,
     )
-    statistic = residual_statistic(fit.residual, u)
+    statistic = residual_statistic(simulation_error(fit.params, u, y), u)
     estimate = fit.params.to_vector()
     # the start is an estimate (the literal one, or the paper's initial values): a fit
     # that stays there is not stuck at a random draw
@@ -318,8 +318,10 @@ def _multistart(
     dtype = u.dtype
     tolerances = {"rtol": rtol, "atol": atol}
     u_max = 0.5 * (jnp.max(u) - jnp.min(u))
-    starts = random_systems(key, n_starts, orders, 1.0, dtype).to_vector()
-    starts = starts.at[:, jnp.array(orders.breakpoints, int)].multiply(u_max)
+    starts = jax.vmap(lambda k: random_system(k, orders, 1.0, dtype))(
+        jax.random.split(key, n_starts)
+    )
+    starts = starts.to_vector().at[:, jnp.array(orders.breakpoints, int)].multiply(u_max)
     if literal_start:
         starts = jnp.concatenate([starts, stage.start[None].astype(dtype)])
     starts = CascadeParams.from_vector(starts, orders, check=False)
