@@ -134,7 +134,7 @@ def main(argv=None) -> int:
                 print(lines[-1], flush=True)
     command = (
         f"python benchmarks/brfd_effect.py --data {args.data} --decimate {args.decimate} "
-        f"--effects {args.effects}"
+        f"--effects {args.effects}" + (f" --out {args.out}" if args.out else "")
     )
     text = "\n".join([f"Command: `{command}`", "", *lines]) + "\n"
     if args.out:
