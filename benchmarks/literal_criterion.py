@@ -86,7 +86,7 @@ def sweep_records(example: int, snr: float, seed: int, folder: pathlib.Path, com
             "max_abs_error": float(err),
             "recovered": bool(row.recovered),
         }
-        for row, err in zip(frame.itertuples(), error)
+        for row, err in zip(frame.itertuples(), error, strict=True)
     ]
 
 
@@ -145,8 +145,10 @@ def main(argv=None) -> int:
         for seed in seeds:
             case += sweep_records(example, snr, seed, folder, command)
         rows += [{"example": example, "snr": snr, **row} for row in case]
-        print(f"example {example}, SNR {snr:g}: {len(case)} fits in "
-              f"{time.perf_counter() - start:.1f} s")
+        print(
+            f"example {example}, SNR {snr:g}: {len(case)} fits in "
+            f"{time.perf_counter() - start:.1f} s"
+        )
     table = pd.DataFrame(rows)
     table.to_csv(stem.with_name(stem.name + ".csv"), index=False)
     header = [

@@ -397,39 +397,18 @@ def model_error_loop(
         tried = [
             n for n in tried if not EFFECTS[n].needs_signature or failed & set(EFFECTS[n].signature)
         ]
+        # what every candidate of this round is fitted and judged against
+        fit_against = (model, current, failed, round_, us, ys, records, assess)
+        judged_by = {"t_threshold": t_threshold, "min_gain": min_gain}
         for name in tried:
-            c = _candidate(
-                name,
-                model,
-                current,
-                failed,
-                round_,
-                us,
-                ys,
-                records,
-                assess,
-                t_threshold=t_threshold,
-                min_gain=min_gain,
-            )
+            c = _candidate(name, *fit_against, **judged_by)
             round_candidates.append(c)
             say(
                 f"  {c.label:<24} error {c.error:.4g}  t {c.t:7.2f}  "
                 f"{'significant' if c.significant else ''}"
             )
         if ARNoise.name in names and ARNoise.name not in added:
-            c = _noise_candidate(
-                model,
-                current,
-                failed,
-                round_,
-                us,
-                ys,
-                records,
-                assess,
-                t_threshold=t_threshold,
-                min_gain=min_gain,
-                noise_alpha=noise_alpha,
-            )
+            c = _noise_candidate(*fit_against, **judged_by, noise_alpha=noise_alpha)
             round_candidates.append(c)
             say(
                 f"  {c.label:<24} prediction error {c.evaluation.prediction_error:.4g}  "

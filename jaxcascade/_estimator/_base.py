@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import abc
 import dataclasses
+import inspect
 import typing
 from typing import Any, ClassVar
 
@@ -68,6 +69,17 @@ class Estimator(eqx.Module):
     def settings(cls) -> dict[str, Any]:
         """Setting names and their defaults."""
         return {f.name: f.default for f in dataclasses.fields(cls)}
+
+
+def keyword_defaults(function) -> dict[str, Any]:
+    """The keyword-only parameters of `function` and their defaults: an estimator's
+    functional form (`voros`, `robust`) is the one place its settings' defaults are
+    written, and its class reads them from there."""
+    return {
+        name: parameter.default
+        for name, parameter in inspect.signature(function).parameters.items()
+        if parameter.kind is inspect.Parameter.KEYWORD_ONLY
+    }
 
 
 def setting(default):

@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import functools
-import inspect
 from typing import ClassVar
 
 import equinox as eqx
@@ -25,7 +24,7 @@ from .._normal_equations import (
 )
 from .._status import Status
 from .._validate import is_traced, record
-from ._base import Estimator, setting
+from ._base import Estimator, keyword_defaults, setting
 from ._solution import PATH_ONLY, Solution, finite
 
 _RUNNING = -1
@@ -367,11 +366,7 @@ def _voros(
 
 
 # `voros`'s settings and their defaults: the one place they are written down.
-_VOROS = {
-    name: parameter.default
-    for name, parameter in inspect.signature(voros).parameters.items()
-    if parameter.kind is inspect.Parameter.KEYWORD_ONLY
-}
+_VOROS = keyword_defaults(voros)
 
 
 class Literal(Estimator):

@@ -181,7 +181,7 @@ def _chain(z, orders: Orders, u_min, u_max):
     diagonal = diagonal.at[s["cL"]].set(jax.nn.sigmoid(z[s["cL"]]))
     diagonal = diagonal.at[s["mR"]].set(jnp.exp(z[s["mR"]]))
     diagonal = diagonal.at[s["cR"]].set(jax.nn.sigmoid(z[s["cR"]]))
-    for name, block in blocks.items():
+    for name in blocks:
         diagonal = diagonal.at[s[name]].set(0.0)
     chain = jnp.diag(diagonal)
     for name, block in blocks.items():

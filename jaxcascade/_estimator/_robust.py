@@ -47,7 +47,6 @@ result is never NaN; a start that fails is simply outranked.
 from __future__ import annotations
 
 import functools
-import inspect
 from typing import ClassVar
 
 import equinox as eqx
@@ -60,7 +59,7 @@ from .._model import CascadeParams, Orders, is_admissible
 from .._prior import random_system
 from .._status import Status
 from .._validate import record
-from ._base import Estimator, setting
+from ._base import Estimator, keyword_defaults, setting
 from ._basin import residual_statistic
 from ._literal import initial_guess, voros
 from ._refine import refine, simulation_error
@@ -151,11 +150,7 @@ def robust(
 
 
 # `robust`'s keyword defaults: the one place they are written (`_robust`, `Robust`)
-DEFAULTS = {
-    name: parameter.default
-    for name, parameter in inspect.signature(robust).parameters.items()
-    if parameter.kind is inspect.Parameter.KEYWORD_ONLY
-}
+DEFAULTS = keyword_defaults(robust)
 
 
 class _Stage(eqx.Module):
