@@ -9,6 +9,7 @@ import jaxcascade as jc
 from jaxcascade._estimator._basin import residual_statistic
 from jaxcascade._estimator._robust import _adaptive, _robust
 from jaxcascade._estimator._solution import PATH_ADAPTIVE, PATH_MULTISTART
+from jaxcascade._prior import random_systems
 
 ORDERS = jc.Orders()
 N = 400
@@ -80,6 +81,39 @@ def test_batched_fit_takes_each_records_path(records):
     )
     assert int(batched.status[1]) == int(one.status)
     np.testing.assert_allclose(batched.params.to_vector()[0], batched.params.to_vector()[2])
+
+
+def test_random_systems_draw_the_prior_in_one_batch():
+    # the multi-start's starts: the same prior as `random_system`, every draw admissible
+    orders = jc.Orders()
+    batch = random_systems(jax.random.PRNGKey(0), 2000, orders)
+    vectors = np.asarray(batch.to_vector())
+    reference = np.asarray(
+        jax.vmap(lambda k: jc.random_system(k, orders).to_vector())(
+            jax.random.split(jax.random.PRNGKey(1), 2000)
+        )
+    )
+    assert vectors.shape == (2000, orders.size)
+    assert bool(jnp.all(jax.vmap(lambda p: jc.is_admissible(p, -2.0, 2.0))(batch)))
+    np.testing.assert_allclose(vectors.min(0), reference.min(0), atol=0.05)
+    np.testing.assert_allclose(vectors.max(0), reference.max(0), atol=0.05)
+    # 2000 draws: the means agree to a few standard errors (< 0.1 for every range here)
+    np.testing.assert_allclose(vectors.mean(0), reference.mean(0), atol=0.1)
+
+
+def test_retries_keep_the_cheaper_estimate_or_one_that_passes(records):
+    # The wrong-basin record with a multi-start too small to find the basin (SMALL): the
+    # first attempt uses the record's key as a single multi-start does, and every retry
+    # can only replace it by an estimate that passes the basin test or costs less.
+    u, y, _ = records[1]
+    key = jax.random.PRNGKey(0)
+    once = _robust(u, y, ORDERS, key, **SMALL, retries=0)
+    again = _robust(u, y, ORDERS, key, **SMALL, retries=2)
+    assert int(once.path) == int(again.path) == PATH_MULTISTART
+    passed = float(residual_statistic(y - jc.simulate(again.params, u), u)) <= 5.0
+    assert float(again.cost) <= float(once.cost) or passed
+    with pytest.raises(ValueError, match="retries"):
+        jc.robust(u, y, ORDERS, retries=-1)
 
 
 @pytest.mark.slow

@@ -23,6 +23,7 @@ import time
 
 import numpy as np
 
+from .._compile import compiler_options
 from .._examples import example as get_example
 from .._model import Orders
 from . import _baseline
@@ -78,7 +79,7 @@ def batched_fit(system: str, n: int, snr: float, settings: dict | None = None):
         solution = robust(u, y, orders, key_fit, **settings)
         return solution.params.to_vector(), truth.to_vector(), solution.status, solution.path
 
-    return jax.jit(jax.vmap(one))
+    return jax.jit(jax.vmap(one), compiler_options=compiler_options())
 
 
 def run_jax(system, realisations=256, n=None, snr=None, repeats=1, seed=0, settings=None):

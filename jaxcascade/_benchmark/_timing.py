@@ -33,6 +33,7 @@ import time
 
 import numpy as np
 
+from .._compile import compiler_options
 from .._examples import example as get_example
 from . import _baseline, _flops
 
@@ -116,7 +117,9 @@ def batched_fit(
         )
         return solution.params.to_vector(), solution.status
 
-    return jax.jit(chunked_vmap(one, batch, in_axes=(0, None))), backend
+    return jax.jit(
+        chunked_vmap(one, batch, in_axes=(0, None)), compiler_options=compiler_options()
+    ), backend
 
 
 def run_jax(

@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-import functools
 from typing import ClassVar
 
 import equinox as eqx
@@ -12,6 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, PRNGKeyArray
 
+from .._compile import jit
 from .._model import CascadeParams, Orders, is_admissible
 from .._normal_equations import (
     FIRST_STEPS,
@@ -227,8 +227,7 @@ def voros(
     )
 
 
-@functools.partial(
-    jax.jit,
+@jit(
     static_argnames=(
         "orders",
         "max_iterations",

@@ -48,6 +48,7 @@ import jax.numpy as jnp
 import numpy as np
 import pandas as pd
 
+from .._compile import compiler_options
 from .._efficiency import crlb
 from .._estimator import estimator
 from .._metrics import nrmse
@@ -170,7 +171,7 @@ def _compiled(orders, n, amplitude, name, settings, batched, family=None):
     )
     if batched:
         one = jax.vmap(one, in_axes=(None, 0, None, None))
-    return jax.jit(one)
+    return jax.jit(one, compiler_options=compiler_options())
 
 
 def _arguments(spec: Spec, cell: Cell, dtype=None):
