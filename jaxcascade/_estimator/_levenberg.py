@@ -51,9 +51,11 @@ def levenberg_marquardt(
     rtol: float = 1e-6,
     atol: float = 1e-9,
     damping: float = 1e-3,
+    residual_size: int | None = None,
 ):
     """Minimise `|r(z)|^2` from `z0`; `evaluate(z) -> (r, JtJ, Jtr)` with `r` the
-    residual (`" T"`) and `JtJ` (`"P P"`), `Jtr` (`" P"`) its Gauss-Newton normal
+    residual (`" T"`, `T = residual_size` when given: otherwise `evaluate` is traced
+    once more to find it) and `JtJ` (`"P P"`), `Jtr` (`" P"`) its Gauss-Newton normal
     equations. Never raises.
 
     **Returns:** `(z, cost, status, steps)`: the estimate, its mean squared residual
@@ -114,7 +116,9 @@ def levenberg_marquardt(
     size = z0.shape[0]
     state = (
         z0,
-        jnp.zeros(jax.eval_shape(evaluate, z0)[0].shape, dtype),
+        jnp.zeros(
+            (residual_size,) if residual_size else jax.eval_shape(evaluate, z0)[0].shape, dtype
+        ),
         jnp.asarray(jnp.inf, dtype),
         jnp.eye(size, dtype=dtype),
         jnp.zeros((size,), dtype),

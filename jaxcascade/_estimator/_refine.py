@@ -223,6 +223,7 @@ def refine(
         max_steps=max_steps,
         rtol=rtol,
         atol=atol,
+        residual_size=u.shape[0],
     )
     return Refined(
         params=from_unconstrained(z, orders, u_min, u_max), cost=cost, status=status, steps=steps
