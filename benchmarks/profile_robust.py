@@ -2,7 +2,8 @@
 
     python benchmarks/profile_robust.py [--system example1] [--batch 32] [--n N]
 
-Prints, per stage, compile seconds (lowering plus XLA, cold) and the best of three runs
+Prints, per stage, compile seconds (lowering plus XLA, cold, with the package's XLA
+options) and the best of three runs
 in milliseconds per record, for a batch of `--batch` records of the system:
 
 - `normal_equations`: one Levenberg-Marquardt evaluation (output, Jacobian by forward
@@ -33,6 +34,7 @@ def main(argv=None) -> int:
 
     jax.config.update("jax_enable_x64", True)
     from jaxcascade._benchmark._robust import SYSTEMS, system_defaults
+    from jaxcascade._compile import compiler_options
     from jaxcascade._estimator import _robust as R
     from jaxcascade._estimator._literal import voros
     from jaxcascade._estimator._refine import normal_equations, to_unconstrained
@@ -85,7 +87,8 @@ def main(argv=None) -> int:
     )
     for name, (function, arguments) in stages.items():
         start = time.perf_counter()
-        compiled = jax.jit(function).lower(*arguments).compile()
+        compiled = jax.jit(function, compiler_options=compiler_options())
+        compiled = compiled.lower(*arguments).compile()
         compile_s = time.perf_counter() - start
         best = float("inf")
         for _ in range(3):

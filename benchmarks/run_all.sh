@@ -14,6 +14,7 @@ bench() {  # issue 6: throughput vs NumPy/SciPy and the FLOP floor; scaling
 }
 bench_robust() {  # issue 16: robust on example1, example2 and the random family, 256 records each
     python benchmarks/bench_robust.py --out results/bench_robust
+    python benchmarks/compile_options.py --out results/compile_options
 }
 distributed() {  # issue 7: in-process vs 1 and 2 local Dask workers
     python benchmarks/distributed_throughput.py --realisations 2048 --n 2000 --workers 1,2 \
