@@ -30,7 +30,8 @@ simulation-error landscape is friendlier (METHOD.md). This estimator
    a wrong basin (NRMSE 0.035-0.54 against a noise floor of 0.033, statistic 6-4850);
    the others were at the noise floor (pole-zero near-cancellations) or accepted in
    step 1. With two retries the benchmark's random family (`jaxcascade bench
-   --estimator robust --system random`) recovers 245 of 256 instead of 243.
+   --estimator robust --system random`) recovered 244 of 256 instead of 243 (one of the
+   four), and 245 with the starts of step 2 drawn at once (other draws).
 
 Batching. Under `vmap` the multi-start of step 2 runs only for the records whose step 1
 failed: a batching rule (`jax.custom_batching.custom_vmap`) gathers them, `fallback_batch`
