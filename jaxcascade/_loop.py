@@ -153,23 +153,33 @@ def fit_parallel(model: ExtendedModel, effect_class, u, y, alternations: int = 1
 
 def model_standard_errors(model: ExtendedModel, u, y) -> dict[str, float]:
     """Estimated standard errors of every estimated parameter of `model` on the record
-    `(u, y)`: the cascade's (`Orders.names`) and each effect's free parameters
-    (`EFFECT.field`), from the output-error information at the estimate with the noise
-    model's whitening (`_efficiency.standard_errors`)."""
-    u = jnp.asarray(u)
-    y = jnp.asarray(y, u.dtype)
+    `(u, y)`, or on several records (sequences of arrays, each simulated from its own
+    initial state and whitened apart): the cascade's (`Orders.names`) and each effect's
+    free parameters (`EFFECT.field`), from the output-error information at the estimate
+    with the noise model's whitening (`_efficiency.standard_errors`). A parameter the
+    records do not determine has an infinite error."""
+    us, ys = _records(u, y)
+    dtype = jnp.asarray(us[0]).dtype
+    us = tuple(jnp.asarray(v) for v in us)
+    y = jnp.concatenate([jnp.asarray(w, dtype) for w in ys])
+    cuts = np.cumsum([v.shape[0] for v in us])[:-1].tolist()
     effects = model.effects
     free, fixed = eqx.partition(effects, tuple(e.free_filter() for e in effects))
     flat, unravel = jax.flatten_util.ravel_pytree(free)
     size = model.orders.size
-    theta = jnp.concatenate([model.params.to_vector().astype(u.dtype), flat.astype(u.dtype)])
+    theta = jnp.concatenate([model.params.to_vector().astype(dtype), flat.astype(dtype)])
 
     def simulate_theta(theta):
         params = CascadeParams.from_vector(theta[:size], model.orders, check=False)
         effects = tuple(eqx.combine(unravel(theta[size:]), fixed))
-        return simulate_with_switches(ExtendedModel(params, effects, model.noise), u)[0]
+        extended = ExtendedModel(params, effects, model.noise)
+        return jnp.concatenate([simulate_with_switches(extended, v)[0] for v in us])
 
-    errors, _ = standard_errors(simulate_theta, theta, y, whiten=model.noise.innovations)
+    def whiten(residual):
+        parts = jnp.split(residual, cuts)
+        return jnp.concatenate([model.noise.innovations(part) for part in parts])
+
+    errors, _ = standard_errors(simulate_theta, theta, y, whiten=whiten)
     names = list(model.orders.names)
     for effect in effects:
         for field in dataclasses.fields(effect):
@@ -266,6 +276,9 @@ class LoopResult:
     steps: list[tuple[str, ExtendedModel, Evaluation]] = dataclasses.field(default_factory=list)
     t_threshold: float = 3.0
     min_gain: float = 0.02
+    # the final model's estimated standard errors on the estimation records
+    # (`model_standard_errors`)
+    standard_errors: dict[str, float] = dataclasses.field(default_factory=dict)
 
     def to_dict(self) -> dict:
         def params(model):
@@ -311,6 +324,7 @@ class LoopResult:
             },
             "model_before": params(self.base),
             "model_after": params(self.final),
+            "standard_errors_after": dict(self.standard_errors),
         }
 
 
@@ -438,8 +452,19 @@ def model_error_loop(
         added.append(chosen.name)
         model, current = chosen.model, chosen.evaluation
         steps.append((f"+ {chosen.label}", model, current))
+    say("standard errors of the final model on the estimation records")
+    errors = model_standard_errors(model, us, ys)
     return LoopResult(
-        before, current, plain(base), model, added, candidates, steps, t_threshold, min_gain
+        before,
+        current,
+        plain(base),
+        model,
+        added,
+        candidates,
+        steps,
+        t_threshold,
+        min_gain,
+        errors,
     )
 
 

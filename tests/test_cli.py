@@ -164,6 +164,10 @@ def test_loop_on_several_records_with_a_window(capsys, tmp_path):
     full = json.loads((tmp_path / "report" / "report.json").read_text())
     assert len(full["records"]["estimation"]) == 2
     assert full["window"]["model_samples"] == [100, 400]
+    # standard errors of the final model on both estimation records, one per parameter
+    errors = result["standard_errors_after"]
+    assert errors == full["standard_errors_after"]
+    assert set(errors) == set(jc.Orders().names) and all(e > 0 for e in errors.values())
     # A window outside the validation record is one line, exit 2.
     argv[argv.index("100:400")] = "100:4000"
     assert main(argv) == 2

@@ -42,6 +42,15 @@ def test_loop_names_the_undeclared_effect(effect):
     report = result.to_dict()
     assert report["effect_added"] == expected
     assert all(np.isfinite(c["error"]) for c in report["candidates"])
+    # the final model's standard errors, on the estimation record: every cascade
+    # parameter has one, finite and positive; without an undeclared effect the estimate
+    # lies within 5 of them of the truth, parameter by parameter
+    errors = report["standard_errors_after"]
+    names = result.final.orders.names
+    assert all(np.isfinite(errors[name]) and errors[name] > 0 for name in names)
+    if effect is None:
+        estimate, truth = result.final.params.to_dict(), TRUTH().to_dict()
+        assert all(abs(estimate[n] - truth[n]) <= 5 * errors[n] for n in names)
 
 
 def test_loop_names_strongly_coloured_noise_on_the_prediction_error():

@@ -192,6 +192,7 @@ def run_loop(args) -> int:
     }
     keys = ("error_before", "error_after", "prediction_error_before", "prediction_error_after")
     keys += ("effect_added", "significance", "candidates", "residual_tests")
+    keys += ("standard_errors_after",)
     if window is not None:
         keys += ("window_error_before", "window_error_after")
     if args.json:
