@@ -39,7 +39,17 @@ from jaxtyping import Array
 
 from ._compile import compile_count, pack, pad, release
 from ._diagnose import ResidualTests, regime_from_switches, residual_tests
-from ._effects import EFFECTS, Effect, ExtendedModel, Start, plain, simulate_with_switches
+from ._effects import (
+    EFFECTS,
+    REPLACEMENTS,
+    STRUCTURAL,
+    Effect,
+    ExtendedModel,
+    OutputOffset,
+    Start,
+    plain,
+    simulate_with_switches,
+)
 from ._efficiency import standard_errors
 from ._estimator._refine import from_unconstrained, least_squares, to_unconstrained
 from ._estimator._robust import Robust
@@ -94,23 +104,25 @@ def _refit(vectors, new: Effect, current: ExtendedModel, groups, orders: Orders,
     (`vmap` over `vectors` and the leading axis of `new`'s parameters), on the packed
     records `groups` (`pack`), each simulated from its own initial state. The cascade
     is refined in its admissible parameterisation (`_estimator._refine`), every effect's
-    free parameters alongside; fixed ones (`Effect.fixed`) are held."""
+    free parameters alongside; fixed ones (`Effect.fixed`) are held. Without the cascade
+    (`ExtendedModel.cascade` False) only the effects are refined."""
     dtype = groups[0][0].dtype
     u_min = jnp.min(jnp.stack([jnp.min(U) for U, _, _ in groups]))
     u_max = jnp.max(jnp.stack([jnp.max(U) for U, _, _ in groups]))
-    size = orders.size
+    size = orders.size if current.cascade else 0
 
     def one(vector, effect):
         effects = current.effects + (effect,)
         free, fixed = eqx.partition(effects, tuple(e.free_filter() for e in effects))
         flat, unravel = jax.flatten_util.ravel_pytree(free)
         params = CascadeParams.from_vector(vector, orders, check=False)
-        z0 = jnp.concatenate([to_unconstrained(params, u_min, u_max), flat.astype(dtype)])
+        cascade = to_unconstrained(params, u_min, u_max)[:size]
+        z0 = jnp.concatenate([cascade, flat.astype(dtype)])
 
         def unpack(z):
-            params = from_unconstrained(z[:size], orders, u_min, u_max)
+            fitted = from_unconstrained(z[:size], orders, u_min, u_max) if size else params
             effects = eqx.combine(unravel(z[size:]), fixed)
-            return ExtendedModel(params, tuple(effects), current.noise)
+            return current.with_(params=fitted, effects=tuple(effects))
 
         def residual(z, args):
             # With a noise model the fit minimises the one-step prediction error (its
@@ -159,10 +171,12 @@ def fit_parallel(model: ExtendedModel, effect_class, u, y, alternations: int = 1
     effect, label = effect_class.fit_records(current, residuals(current))
     for _ in range(alternations):
         targets = tuple(w - _parallel(effect, v) for v, w in zip(us, ys, strict=True))
+        if not current.cascade and not current.effects:
+            break  # nothing to refit under the path
         refitted, _, _ = refit(current, _no_effect(current.params), us, targets)
-        current = ExtendedModel(refitted.params, refitted.effects[:-1], refitted.noise)
+        current = refitted.with_(effects=refitted.effects[:-1])
         effect, label = effect_class.fit_records(current, residuals(current))
-    final = ExtendedModel(current.params, (*current.effects, effect), current.noise)
+    final = current.with_(effects=(*current.effects, effect))
     errors = np.concatenate([w - _simulate(final, v)[0] for v, w in zip(us, ys, strict=True)])
     return final, float(np.mean(errors**2)), label
 
@@ -174,16 +188,20 @@ def _standard_errors(model: ExtendedModel, groups):
     effects = model.effects
     free, fixed = eqx.partition(effects, tuple(e.free_filter() for e in effects))
     flat, unravel = jax.flatten_util.ravel_pytree(free)
-    size = model.orders.size
+    size = model.orders.size if model.cascade else 0
     dtype = groups[0][0].dtype
-    theta = jnp.concatenate([model.params.to_vector().astype(dtype), flat.astype(dtype)])
+    theta = jnp.concatenate([model.params.to_vector().astype(dtype)[:size], flat.astype(dtype)])
     lengths = [int(M.shape[1]) for _, _, M in groups]
     rows = [int(M.shape[0]) for _, _, M in groups]
 
     def simulate_theta(theta):
-        params = CascadeParams.from_vector(theta[:size], model.orders, check=False)
+        params = (
+            CascadeParams.from_vector(theta[:size], model.orders, check=False)
+            if size
+            else model.params
+        )
         effects = tuple(eqx.combine(unravel(theta[size:]), fixed))
-        extended = ExtendedModel(params, effects, model.noise)
+        extended = model.with_(params=params, effects=effects)
         out = [
             jax.vmap(lambda u: simulate_with_switches(extended, u)[0])(U) * M for U, _, M in groups
         ]
@@ -217,7 +235,7 @@ def model_standard_errors(model: ExtendedModel, u, y) -> dict[str, float]:
     own = sum(int(np.shape(v)[0]) for v in us)
     errors = errors * np.sqrt(max(padded - errors.size, 1) / max(own - errors.size, 1))
     effects = model.effects
-    names = list(model.orders.names)
+    names = list(model.orders.names) if model.cascade else []
     for effect in effects:
         for field in dataclasses.fields(effect):
             if field.name not in effect.fixed:
@@ -291,12 +309,15 @@ class Candidate:
     model: ExtendedModel | None = None
     evaluation: Evaluation | None = None
     comparison: Comparison | None = None
+    action: str = "add"  # or "replace": the effect replaces the cascade
 
     def to_dict(self) -> dict:
         e, c = self.evaluation, self.comparison
         return {
             "round": self.round,
             "name": self.name,
+            "action": self.action,
+            "structure": None if self.model is None else self.model.structure(),
             "variant": self.label,
             "error": self.error,
             "prediction_error": None if e is None else e.prediction_error,
@@ -326,6 +347,8 @@ class LoopResult:
     standard_errors: dict[str, float] = dataclasses.field(default_factory=dict)
     # programs XLA compiled during the loop (`_compile.compile_count`)
     programs_compiled: int = 0
+    # what each round did: `{"effect", "action" ("add" or "replace"), "round"}`
+    actions: list[dict] = dataclasses.field(default_factory=list)
 
     def to_dict(self) -> dict:
         def params(model):
@@ -344,6 +367,9 @@ class LoopResult:
             "window_error_before": self.before.window_error,
             "window_error_after": self.after.window_error,
             "effect_added": list(self.added),
+            "actions": list(self.actions),
+            "structure_before": self.base.structure(),
+            "structure_after": self.final.structure(),
             "significance": {
                 "test": TEST_NAME,
                 "statistic": "DM = mean(d) / sqrt(S / N), d = e_current^2 - e_candidate^2",
@@ -442,6 +468,7 @@ def model_error_loop(
     steps = [("declared cascade", model, current)]
     names = tuple(effects or (*EFFECTS, ARNoise.name))
     added: list[str] = []
+    actions: list[dict] = []
     candidates: list[Candidate] = []
     for round_ in range(1, max_effects + 1):
         if current.tests.ok:
@@ -456,15 +483,20 @@ def model_error_loop(
         round_candidates = []
         # Effects marked `needs_signature` (the hysteresis effects) only when a test of
         # their signature failed.
-        tried = [n for n in names if n not in added and n in EFFECTS]
+        tried = [n for n in names if n not in added and n not in model.names and n in EFFECTS]
         tried = [
             n for n in tried if not EFFECTS[n].needs_signature or failed & set(EFFECTS[n].signature)
         ]
+        if not model.cascade:  # no cascade left whose orders a structural effect changes
+            tried = [n for n in tried if n not in STRUCTURAL]
+        # A hysteresis path may also replace the cascade (the declared structure may be
+        # the wrong one, not only incomplete): tried where it would be added.
+        replacing = [n for n in tried if model.cascade and n in REPLACEMENTS]
         # what every candidate of this round is fitted and judged against
         fit_against = (model, current, failed, round_, us, ys, records, assess)
         judged_by = {"t_threshold": t_threshold, "min_gain": min_gain}
-        for name in tried:
-            c = _candidate(name, *fit_against, **judged_by)
+        for name, action in [(n, "add") for n in tried] + [(n, "replace") for n in replacing]:
+            c = _candidate(name, *fit_against, **judged_by, action=action)
             round_candidates.append(c)
             say(
                 f"  {c.label:<24} error {c.error:.4g}  t {c.t:7.2f}  "
@@ -497,10 +529,13 @@ def model_error_loop(
                 say(f"round {round_}: no candidate explains the residual significantly; stop")
                 break
             chosen = noise_candidates[0]
-        say(f"round {round_}: adding {chosen.label} (error {chosen.error:.4g})")
+        verb = "replacing the cascade by" if chosen.action == "replace" else "adding"
+        say(f"round {round_}: {verb} {chosen.label} (error {chosen.error:.4g})")
         added.append(chosen.name)
+        actions.append({"effect": chosen.name, "action": chosen.action, "round": round_})
         model, current = chosen.model, chosen.evaluation
-        steps.append((f"+ {chosen.label}", model, current))
+        prefix = "replaces the cascade: " if chosen.action == "replace" else "+ "
+        steps.append((f"{prefix}{chosen.label}", model, current))
         # The round's candidates compiled programs of their own structures: free them
         # (each stays mapped in memory until released).
         release()
@@ -518,14 +553,25 @@ def model_error_loop(
         min_gain,
         errors,
         compile_count() - compiled_before,
+        actions,
     )
 
 
 def _candidate(name, model, current, failed, round_, us, ys, records, assess, **options):
-    """Fit the effect `name` added to `model` and score it on the validation record."""
+    """Fit the effect `name` added to `model` (`action="add"`), or in place of its cascade
+    (`action="replace"`: the effect's path from the input plus a fitted output offset,
+    the model's other effects kept), and score it on the validation record."""
     t_threshold, min_gain = options.get("t_threshold", 3.0), options.get("min_gain", 0.02)
+    action = options.get("action", "add")
     effect = EFFECTS[name]
-    if effect.linear:
+    if action == "replace":
+        offset = float(np.mean(np.concatenate([np.asarray(y) for y in ys])))
+        alone = model.with_(
+            cascade=False, effects=(*model.effects, OutputOffset(jnp.asarray(offset)))
+        )
+        fitted, _, label = fit_parallel(alone, effect, us, ys)
+        label = f"replace:{label}"
+    elif effect.linear:
         fitted, _, label = fit_parallel(model, effect, us, ys)
     else:
         best = None
@@ -548,6 +594,7 @@ def _candidate(name, model, current, failed, round_, us, ys, records, assess, **
         fitted,
         evaluation,
         comparison,
+        action,
     )
 
 
@@ -557,10 +604,10 @@ def _noise_candidate(model, current, failed, round_, us, ys, records, assess, **
     fit is biased by coloured noise, and the whitened residual shows that bias to the
     input tests), judged on the validation record's one-step-ahead prediction error."""
     noise, p_value = ARNoise.fit_records([r[2] for r in records])
-    noise_model = ExtendedModel(model.params, model.effects, noise)
-    if noise.order:
+    noise_model = model.with_(noise=noise)
+    if noise.order and (model.cascade or model.effects):
         refitted, _, _ = refit(noise_model, _no_effect(model.params), us, ys)
-        noise_model = ExtendedModel(refitted.params, refitted.effects[:-1], noise)
+        noise_model = refitted.with_(effects=refitted.effects[:-1], noise=noise)
     evaluation = assess(noise_model)
     comparison = diebold_mariano(current.innovation, evaluation.innovation, "prediction")
     gain = 1 - evaluation.prediction_error / current.prediction_error

@@ -379,3 +379,33 @@ def jaxcascade_record(model, seed, n):
     from jaxcascade._testing import undeclared_record
 
     return undeclared_record(model, jax.random.PRNGKey(seed), n, SNR, None)
+
+
+def test_loop_replaces_the_cascade_by_a_hysteresis_path():
+    # Issue 21, item 2: a friction force behind a slack with no cascade in it. The loop
+    # tries the hysteresis path added to the declared cascade and in its place; the
+    # replacement wins, with the true parameters, and the structure line says so.
+    from jaxcascade._effects import BacklashFriction
+
+    truth = BacklashFriction(*(jnp.asarray(v) for v in (0.08, 30.0, 2.3, 2.0, 0.1)))
+    rng = np.random.default_rng(3)
+
+    def record(n, amplitude):
+        u = np.cumsum(rng.normal(size=n))
+        u = scipy.signal.lfilter([0.05], [1, -0.95], u - u.mean())
+        u = amplitude * u / np.abs(u).max()
+        return u, np.asarray(truth.parallel(jnp.asarray(u))) + 0.05 * rng.normal(size=n)
+
+    (u1, y1), (u2, y2), (u_val, y_val) = record(1500, 0.5), record(1500, 0.3), record(1500, 0.4)
+    result = model_error_loop(
+        [u1, u2], [y1, y2], u_val, y_val, jc.Orders(), effects=("backlash_friction",)
+    )
+    assert result.actions[0] == {"effect": "backlash_friction", "action": "replace", "round": 1}
+    assert not result.final.cascade
+    assert result.final.structure().startswith("u -> backlash_friction")
+    (path,) = [e for e in result.final.effects if e.name == "backlash_friction"]
+    got = [abs(float(v)) for v in (path.gap, path.stiffness, path.upper, path.lower)]
+    np.testing.assert_allclose(got, [0.08, 30.0, 2.3, 2.0], rtol=0.05)
+    # noise 0.05 on a force of about 2: the floor is a few hundredths
+    assert result.after.error < 0.1 < result.before.error
+    assert "u -> backlash_friction" in result.to_dict()["structure_after"]

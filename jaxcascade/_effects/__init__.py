@@ -81,3 +81,7 @@ EFFECTS: dict[str, type[Effect]] = {
 }
 # the hysteresis paths: tried only when the hysteresis residual test failed
 HYSTERESIS = tuple(name for name, effect in EFFECTS.items() if effect.needs_signature)
+# the effects that change the cascade's orders (nothing to change without a cascade)
+STRUCTURAL = ("dynamics_order", "pwl_segment")
+# the hysteresis paths that may also replace the cascade (a path of the input alone)
+REPLACEMENTS = tuple(name for name in HYSTERESIS if EFFECTS[name].linear)

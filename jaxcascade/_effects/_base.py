@@ -125,11 +125,40 @@ class ExtendedModel(eqx.Module):
     - `params`: the cascade (its orders include structural effects).
     - `effects`: the added effects, in order.
     - `noise`: the output noise model (white: order 0).
+    - `cascade`: False when an effect has replaced the cascade's path (the loop's
+      replacement candidates): the output is then the effects' alone (a parallel path of
+      the input, plus output effects), and `params` are not used.
     """
 
     params: CascadeParams
     effects: tuple[Effect, ...]
     noise: ARNoise
+    cascade: bool = eqx.field(static=True, default=True)
+
+    def with_(self, **changes) -> ExtendedModel:
+        """A copy with some fields changed (the structure kept)."""
+        return dataclasses.replace(self, **changes)
+
+    def structure(self) -> str:
+        """The model's structure as one line, e.g.
+        `u -> input_delay -> pwl -> linear -> backlash -> + output_offset -> y`."""
+        inputs = [e.name for e in self.effects if type(e).input is not Effect.input]
+        outputs = [e.name for e in self.effects if type(e).output is not Effect.output]
+        paths = [e.name for e in self.effects if type(e).parallel is not Effect.parallel]
+        chain = ["u", *inputs]
+        if self.cascade:
+            o = self.orders
+            chain += [f"pwl({o.nR},{o.nL})", f"linear({o.r},{o.p})", "backlash"]
+            line = " -> ".join(chain)
+            if paths:
+                line = f"{line} (+ {' + '.join(f'{p}(u)' for p in paths)})"
+        else:
+            line = " -> ".join(chain + [" + ".join(paths) or "0"])
+        for name in outputs:
+            line += f" -> {name}"
+        if self.noise.order:
+            line += f" -> + AR({self.noise.order}) noise"
+        return line + " -> y"
 
     @property
     def orders(self) -> Orders:
@@ -151,18 +180,24 @@ def simulate_extended(model: ExtendedModel, u):
 
 
 def simulate_with_switches(model: ExtendedModel, u):
-    """Simulated output and the backlash regime signals `(y, x, y_cascade)`."""
+    """Simulated output and the backlash regime signals `(y, x, y_cascade)`. Without the
+    cascade (`ExtendedModel.cascade` False) `x` is the input after the input effects and
+    `y_cascade` is zero."""
     u_model = u
     for effect in model.effects:
         u = effect.input(u)
-    inner = signals(model.params, u)
-    y = inner.y
+    if model.cascade:
+        inner = signals(model.params, u)
+        x, y = inner.x, inner.y
+    else:
+        x, y = u, jnp.zeros_like(u)
+    y_cascade = y
     for effect in model.effects:
-        y = effect.output(y, inner.x)
+        y = effect.output(y, x)
         path = effect.parallel(u_model)
         if path is not None:
             y = y + path
-    return y, inner.x, inner.y
+    return y, x, y_cascade
 
 
 class OutputOffset(Effect):
