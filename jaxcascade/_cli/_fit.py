@@ -9,18 +9,7 @@ from __future__ import annotations
 
 import math
 
-import jax
-import jax.numpy as jnp
-import numpy as np
-
-from .._data import read_record
-from .._efficiency import standard_errors
-from .._estimator import ESTIMATORS, estimator
-from .._metrics import fit_percent, score
-from .._model import CascadeParams, Orders
-from .._simulate import simulate
-from .._status import Status
-from .._validate import record as checked
+from .._names import ESTIMATORS
 from ._common import (
     CLIError,
     add_record_arguments,
@@ -33,7 +22,7 @@ from ._common import (
 FAILED = 3  # exit code of a fit whose status is a failure
 
 
-def fit_record(u, y, orders: Orders, name: str = "robust", **settings):
+def fit_record(u, y, orders, name: str = "robust", **settings):
     """Fit one record with the registered estimator `name`.
 
     Returns `(solution, error, errors)`: `error` is the NRMSE of the free-run simulation
@@ -41,6 +30,17 @@ def fit_record(u, y, orders: Orders, name: str = "robust", **settings):
     the estimated standard error of every parameter (`_efficiency.standard_errors`: the
     output-error information at the estimate, sigma from the residual, white noise).
     """
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+
+    from .._efficiency import standard_errors
+    from .._estimator import estimator
+    from .._metrics import score
+    from .._model import CascadeParams
+    from .._simulate import simulate
+    from .._validate import record as checked
+
     u, y = checked(u, y, orders=orders, where="fit")
     solution = jax.device_get(estimator(name, **settings)(u, y, orders))
     vector = jnp.asarray(solution.params.to_vector(), u.dtype)
@@ -55,6 +55,12 @@ def fit_record(u, y, orders: Orders, name: str = "robust", **settings):
 
 
 def run_fit(args) -> int:
+    # imported here, not at the top: `--help` answers without importing JAX
+    from .._data import read_record
+    from .._estimator import estimator
+    from .._metrics import fit_percent
+    from .._status import Status
+
     orders = parse_orders(args.orders)
     if args.decimate < 1:
         raise CLIError(f"--decimate must be an integer >= 1, got {args.decimate}.")
