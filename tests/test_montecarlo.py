@@ -216,6 +216,14 @@ def test_bad_specs_fail_before_any_file_is_written(tmp_path, capsys, extra, mess
             "needs the sample sizes",
         ),
         ("example = 1\nn = 300\nsnr = [25, 25]\n", "repeats a value"),
+        # a plain value where a table belongs: the message names the key likely meant
+        ('example = 1\nn = 300\nestimator = "robust"\n', 'estimators = ["robust"]'),
+        (
+            'example = 1\nn = 300\nestimator = ["literal", "robust"]\n',
+            'estimators = ["literal", "robust"]',
+        ),
+        ("example = 1\nn = 300\ninput = 3.0\n", "[input] amplitude = 3.0"),
+        ('example = 1\nn = 300\ninput = "uniform"\n', '[input] distribution = "uniform"'),
     ],
 )
 def test_bad_spec_files(tmp_path, capsys, text, message):
