@@ -57,6 +57,7 @@ def fit_record(u, y, orders, name: str = "robust", **settings):
 def run_fit(args) -> int:
     # imported here, not at the top: `--help` answers without importing JAX
     from .._data import read_record
+    from .._efficiency import not_identifiable
     from .._estimator import estimator
     from .._metrics import fit_percent
     from .._status import Status
@@ -77,12 +78,19 @@ def run_fit(args) -> int:
     solution, error, errors = fit_record(record.u, record.y, orders, args.estimator)
     status = Status(int(solution.status))
     estimates = solution.params.to_dict()
+    # Which parameters the record does not determine: said beside the status (which the
+    # estimator and the sweeps share, unchanged), in the message and in the table.
+    unknown = not_identifiable(solution.params, errors, record.u) if not status.failure else {}
+    message = status.message
+    if unknown:
+        message += f" {_listed(list(unknown))} {_are(unknown)} not identifiable from this record."
     result = {
         "estimator": args.estimator,
         "status": status.name,
-        "message": status.message,
+        "message": message,
         "estimates": estimates,
         "std_errors": errors,
+        "not_identifiable": unknown,
         "nrmse": error,  # inf (null in JSON) when the estimate's simulation blows up
         "iterations": int(solution.iterations),
     }
@@ -97,11 +105,28 @@ def run_fit(args) -> int:
     print(f"{args.estimator} estimator: {status.name} after {result['iterations']} iterations")
     if status.failure:
         print(f"failed: {status.message}")
+    if unknown:
+        print(
+            f"not identifiable from this record: {_listed(list(unknown))}; the data do not "
+            f"determine {'its value' if len(unknown) == 1 else 'their values'} (why: below), "
+            "the other estimates stand"
+        )
     shown = f"{error:.4g} (fit {fit_percent(error):.1f} %)" if math.isfinite(error) else "inf"
     print(f"free-run NRMSE {shown} on {len(record)} samples")
     for name, value in estimates.items():
-        print(f"  {name:>4} = {value: .6f} ± {errors[name]:.2g}")
+        if name in unknown:
+            print(f"  {name:>4} = {value: .6f}   not identifiable: {unknown[name]}")
+        else:
+            print(f"  {name:>4} = {value: .6f} ± {errors[name]:.2g}")
     return code
+
+
+def _listed(names: list[str]) -> str:
+    return names[0] if len(names) == 1 else f"{', '.join(names[:-1])} and {names[-1]}"
+
+
+def _are(names) -> str:
+    return "is" if len(names) == 1 else "are"
 
 
 def add_parser(subparsers) -> None:
