@@ -2,7 +2,9 @@
 
 Exit codes: 0 when the fit's status is usable (`converged`, `cycled`), `FAILED` (3) when
 it is a failure (`Status.failure`; the result is printed all the same), 2 for a bad
-request (one line on stderr, nothing fitted).
+request (one line on stderr, nothing fitted). Parameters the record does not determine
+(`_efficiency.not_identifiable`) are named in the message and the table, beside a status
+that stays the estimator's.
 """
 
 from __future__ import annotations
