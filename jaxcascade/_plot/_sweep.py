@@ -128,7 +128,7 @@ def plot_statistic(summary: pd.DataFrame, statistic: str, against: str, path) ->
             for _, line in cells.groupby(other, sort=True):
                 ax.plot(line[against], line["crlb_std"], **_BOUND)
         _log_axis(ax, rows[against])
-        if statistic == "std":
+        if statistic in ("std", "rmse"):  # positive, spanning decades across a grid
             ax.set_yscale("log")
         ax.set_title(name, fontsize=10)
         ax.set_xlabel("SNR" if against == "snr" else "N")
