@@ -12,7 +12,8 @@ Estimators (each fits one record and returns a `Solution` with a `Status`)
     (output-error least squares from the literal estimate, multi-start fallback),
     `refine`; the registry `ESTIMATORS` and `estimator` (`estimator(name, **settings)`);
     `Estimator`, the interface; `initial_guess`, `regression` (the key-term regression,
-    eqs. 15-18); `status_names` (codes to names).
+    eqs. 15-18); `status_names` (codes to names); `solution_table` (a `Solution` of
+    any batch shape, e.g. after `jax.vmap`, as a pandas DataFrame, one row per record).
     Records are checked before any work: one 1-D record of real, finite numbers (lists
     and NumPy arrays are converted), `u` and `y` of equal length, at least
     `Orders.min_samples` samples; anything else is a `ValueError` or `TypeError` saying
@@ -34,81 +35,133 @@ Nothing here changes JAX's configuration: enable float64 yourself where you need
 (`jax.config.update("jax_enable_x64", True)`); the command line does.
 """
 
-from ._arx import ARX as ARX, best_arx as best_arx, fit_arx as fit_arx
-from ._data import (
-    Record as Record,
-    Scaling as Scaling,
-    read_record as read_record,
-    record_from_arrays as record_from_arrays,
-    split_record as split_record,
-)
-from ._diagnose import (
-    ResidualTests as ResidualTests,
-    regime_from_switches as regime_from_switches,
-    residual_tests as residual_tests,
-)
-from ._efficiency import (
-    crlb as crlb,
-    fisher_information as fisher_information,
-    jacobian as jacobian,
-    standard_errors as standard_errors,
-)
-from ._effects import (
-    EFFECTS as EFFECTS,
-    Effect as Effect,
-    ExtendedModel as ExtendedModel,
-    simulate_extended as simulate_extended,
-)
-from ._estimator import (
-    ESTIMATORS as ESTIMATORS,
-    Estimator as Estimator,
-    Solution as Solution,
-    estimator as estimator,
-)
-from ._estimator._literal import Literal as Literal, initial_guess as initial_guess, voros as voros
-from ._estimator._refine import refine as refine
-from ._estimator._robust import Robust as Robust, robust as robust
-from ._examples import EXAMPLES as EXAMPLES, Example as Example, example as example
-from ._loop import LoopResult as LoopResult, model_error_loop as model_error_loop
-from ._metrics import fit_percent as fit_percent, nrmse as nrmse
-from ._model import (
-    CascadeParams as CascadeParams,
-    Orders as Orders,
-    is_admissible as is_admissible,
-    is_stable as is_stable,
-)
-from ._montecarlo._engine import (
-    cell_key as cell_key,
-    chunk_memory as chunk_memory,
-    run_chunk as run_chunk,
-    run_realisation as run_realisation,
-)
-from ._montecarlo._run import run as run
-from ._montecarlo._spec import Cell as Cell, Spec as Spec
-from ._montecarlo._tables import (
-    compare as compare,
-    read_metadata as read_metadata,
-    read_summary as read_summary,
-    summarise as summarise,
-)
-from ._noise import ARNoise as ARNoise
-from ._plot._residuals import (
-    plot_residual_tests as plot_residual_tests,
-    residual_figures as residual_figures,
-    save_residual_figures as save_residual_figures,
-)
-from ._plot._sweep import plot_sweep as plot_sweep
-from ._prior import random_system as random_system
-from ._regression import regression as regression
-from ._simulate import (
-    add_noise as add_noise,
-    backlash as backlash,
-    linear_block as linear_block,
-    measure as measure,
-    pwl as pwl,
-    signals as signals,
-    simulate as simulate,
-    uniform_input as uniform_input,
-)
-from ._status import Status as Status, status_names as status_names
+# The public names are imported on first use (PEP 562), so that `import jaxcascade` and
+# the command line's `--help` do not import JAX; `dir(jaxcascade)` lists them all.
+
+import importlib
+
 from ._version import __version__ as __version__
+
+# module: the public names it provides
+_MODULES = {
+    "._arx": (
+        "ARX",
+        "best_arx",
+        "fit_arx",
+    ),
+    "._data": (
+        "Record",
+        "Scaling",
+        "read_record",
+        "record_from_arrays",
+        "split_record",
+    ),
+    "._diagnose": (
+        "ResidualTests",
+        "regime_from_switches",
+        "residual_tests",
+    ),
+    "._efficiency": (
+        "crlb",
+        "fisher_information",
+        "jacobian",
+        "standard_errors",
+    ),
+    "._effects": (
+        "EFFECTS",
+        "Effect",
+        "ExtendedModel",
+        "simulate_extended",
+    ),
+    "._estimator": (
+        "ESTIMATORS",
+        "Estimator",
+        "Solution",
+        "estimator",
+        "solution_table",
+    ),
+    "._estimator._literal": (
+        "Literal",
+        "initial_guess",
+        "voros",
+    ),
+    "._estimator._refine": ("refine",),
+    "._estimator._robust": (
+        "Robust",
+        "robust",
+    ),
+    "._examples": (
+        "EXAMPLES",
+        "Example",
+        "example",
+    ),
+    "._loop": (
+        "LoopResult",
+        "model_error_loop",
+    ),
+    "._metrics": (
+        "fit_percent",
+        "nrmse",
+    ),
+    "._model": (
+        "CascadeParams",
+        "Orders",
+        "is_admissible",
+        "is_stable",
+    ),
+    "._montecarlo._engine": (
+        "cell_key",
+        "chunk_memory",
+        "run_chunk",
+        "run_realisation",
+    ),
+    "._montecarlo._run": ("run",),
+    "._montecarlo._spec": (
+        "Cell",
+        "Spec",
+    ),
+    "._montecarlo._tables": (
+        "compare",
+        "read_metadata",
+        "read_summary",
+        "summarise",
+    ),
+    "._noise": ("ARNoise",),
+    "._plot._residuals": (
+        "plot_residual_tests",
+        "residual_figures",
+        "save_residual_figures",
+    ),
+    "._plot._sweep": ("plot_sweep",),
+    "._prior": ("random_system",),
+    "._regression": ("regression",),
+    "._simulate": (
+        "add_noise",
+        "backlash",
+        "linear_block",
+        "measure",
+        "pwl",
+        "signals",
+        "simulate",
+        "uniform_input",
+    ),
+    "._status": (
+        "Status",
+        "status_names",
+    ),
+}
+_EXPORTS = {name: module for module, names in _MODULES.items() for name in names}
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str):
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'jaxcascade' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module, __name__), name)
+    globals()[name] = value  # later lookups skip this function
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *_EXPORTS})

@@ -23,6 +23,9 @@ concentrates). `fisher_information` accepts a batch of records for the other one
 `sigma^2` estimated from the residual (`sum r^2 / (N - P)`), and, when a noise model
 whitens the residual, the whitened Jacobian (generalised least squares): the estimated
 standard errors of the estimate, as MATLAB's `getcov` reports them.
+
+**Identifiability** (`not_identifiable`): which parameters of a fit the record does not
+determine, each with the reason, for the reports of a fit (host side).
 """
 
 from __future__ import annotations
@@ -117,3 +120,54 @@ def standard_errors(
     n, p = J.shape
     sigma = jnp.sqrt(jnp.sum(residual**2) / max(n - p, 1))
     return _bound(J, sigma), sigma
+
+
+# A breakpoint needs input samples on both sides of it: with fewer than this many on one
+# side its hinge is (almost) linear over the record, and neither the breakpoint nor the
+# change of slope at it is determined (the README's 10 samples per parameter).
+MIN_SAMPLES_BEYOND = 10
+
+
+def not_identifiable(params: CascadeParams, errors: dict, u) -> dict[str, str]:
+    """The parameters of the estimate `params` that the record (input `u`) does not
+    determine, by name, each with the reason in a phrase (an empty dict when all are):
+
+    - a parameter whose standard error (`errors`, by name, from `standard_errors`) is
+      infinite: the information is singular in its direction (e.g. two breakpoints that
+      coincide, so that their slopes act as one);
+    - a breakpoint (`DR_i`, `DL_i`) with fewer than `MIN_SAMPLES_BEYOND` input samples
+      on one side, and the change of slope at it (`MR_{i+1}`, `ML_{i+1}`): the record
+      holds (almost) no data beyond it, as when the true breakpoint lies outside the
+      input's range;
+    - a breakpoint whose change of slope is within two standard errors of zero: the
+      record shows no kink there to place it by.
+    """
+    import numpy as np
+
+    u = np.asarray(u, float)
+    values = params.to_dict()
+    reasons = {
+        name: "its standard error is infinite (the record does not separate it from the "
+        "other parameters)"
+        for name, error in errors.items()
+        if not np.isfinite(error)
+    }
+    for side in ("R", "L"):
+        for i in range(1, getattr(params.orders, f"n{side}")):
+            breakpoint_, slope = f"D{side}{i}", f"M{side}{i + 1}"
+            at = values[breakpoint_]
+            beyond = int(min(np.sum(u < at), np.sum(u > at)))
+            if beyond < MIN_SAMPLES_BEYOND:
+                why = (
+                    f"{breakpoint_} = {at:.4g} has {beyond} input sample(s) on one side "
+                    f"(input range [{u.min():.4g}, {u.max():.4g}])"
+                )
+                reasons.setdefault(breakpoint_, why)
+                reasons.setdefault(slope, why)
+            elif not abs(values[slope]) > 2 * errors[slope]:
+                reasons.setdefault(
+                    breakpoint_,
+                    f"the change of slope at it ({slope} = {values[slope]:.3g} +- "
+                    f"{errors[slope]:.2g}) is not distinguishable from zero",
+                )
+    return {name: reasons[name] for name in params.names if name in reasons}

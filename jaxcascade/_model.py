@@ -285,7 +285,11 @@ class CascadeParams(eqx.Module):
         """`{name: float}` for one (unbatched) parameter set."""
         vector = np.asarray(jax.device_get(self.to_vector()), dtype=float)
         if vector.ndim != 1:
-            raise ValueError("to_dict needs a single parameter set, not a batch.")
+            raise ValueError(
+                f"to_dict and to_series need a single parameter set, not a batch of shape "
+                f"{vector.shape[:-1]}; for a table with one row per record use "
+                "jaxcascade.solution_table(solution) (or solution_table(params))."
+            )
         return dict(zip(self.names, vector.tolist(), strict=True))
 
     def to_series(self):

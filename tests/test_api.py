@@ -17,11 +17,18 @@ def readme_api() -> set[str]:
 
 
 def exported() -> set[str]:
+    # the names are imported on first use: `dir` lists them, `getattr` imports them
     return {
         name
-        for name, value in vars(jaxcascade).items()
-        if not name.startswith("_") and not isinstance(value, types.ModuleType)
+        for name in dir(jaxcascade)
+        if not name.startswith("_")
+        and not isinstance(getattr(jaxcascade, name), types.ModuleType)
     }
+
+
+def test_all_lists_every_export():
+    # `exported` resolves every name `dir` lists (an unresolvable one raises)
+    assert set(jaxcascade.__all__) == exported()
 
 
 def test_readme_lists_the_exports():

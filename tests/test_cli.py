@@ -92,8 +92,9 @@ def test_fit_json_on_a_simulated_record(capsys, tmp_path):
     assert main(["fit", str(path), "--input", "u", "--output", "y", "--json"]) == 0
     result = json.loads(capsys.readouterr().out)
     keys = {"estimator", "status", "message", "estimates", "std_errors", "nrmse", "iterations"}
-    assert set(result) == keys
+    assert set(result) == keys | {"not_identifiable"}
     assert result["estimator"] == "robust" and result["status"] == "converged"
+    assert result["not_identifiable"] == {}  # the input covers every breakpoint
     # SNR 50: the noise floor of the NRMSE is 1/50; a correct fit sits near it.
     assert result["nrmse"] < 1.3 / 50
     truth = ex.params().to_dict()
@@ -104,6 +105,33 @@ def test_fit_json_on_a_simulated_record(capsys, tmp_path):
     assert set(errors) == set(truth)
     assert all(1e-4 < errors[k] < 1e-2 for k in truth)
     assert max(abs(result["estimates"][k] - v) / errors[k] for k, v in truth.items()) < 6
+
+
+def test_fit_says_which_parameters_the_record_does_not_determine(capsys, tmp_path):
+    import jax
+
+    import jaxcascade as jc
+
+    # Example 1's breakpoints (DR1 = 1, DL1 = -0.9) outside the input's range (-0.8, 0.8):
+    # the record holds no kink to place them by, nor the change of slope beyond them.
+    ex = jc.example(1)
+    key_u, key_e = jax.random.split(jax.random.PRNGKey(0))
+    u = jc.uniform_input(key_u, 1500, 0.8)
+    y, _ = jc.measure(key_e, ex.params(), u, 50.0)
+    path = tmp_path / "record.csv"
+    pd.DataFrame({"u": np.asarray(u), "y": np.asarray(y)}).to_csv(path, index=False)
+    argv = ["fit", str(path), "--input", "u", "--output", "y"]
+    assert main([*argv, "--json"]) == 0  # the status is usable: the others stand
+    result = json.loads(capsys.readouterr().out)
+    unknown = set(result["not_identifiable"])
+    assert {"DR1", "DL1"} <= unknown <= {"DR1", "MR2", "DL1", "ML2"}
+    assert "not identifiable from this record" in result["message"]
+    assert main(argv) == 0
+    text = capsys.readouterr().out
+    assert "not identifiable from this record: " in text
+    rows = {line.split()[0]: line for line in text.splitlines() if " = " in line}
+    assert {name for name, row in rows.items() if "not identifiable" in row} == unknown
+    assert all("±" in rows[name] for name in set(rows) - unknown)
 
 
 def test_no_traceback_from_the_installed_entry_point(tmp_path):

@@ -7,7 +7,13 @@ import numpy as np
 import pytest
 
 import jaxcascade as jc
-from jaxcascade._efficiency import crlb, fisher_information, jacobian, standard_errors
+from jaxcascade._efficiency import (
+    crlb,
+    fisher_information,
+    jacobian,
+    not_identifiable,
+    standard_errors,
+)
 from jaxcascade._montecarlo._tables import crlb_column, summarise
 
 EX = jc.example(1)
@@ -112,3 +118,19 @@ def test_sweep_summary_reports_bound_and_efficiency():
         m = int(row["used"])
         assert row["efficiency_se"] >= row["efficiency"] * np.sqrt(2 / (m - 1))
         assert row["efficiency_se"] <= row["efficiency"] * np.sqrt(2 / (m - 1)) * 1.1
+
+
+def test_not_identifiable_names_each_undetermined_parameter_with_its_reason():
+    ex = jc.example(1)  # DR1 = 1.0, DL1 = -0.9; slopes MR2 = -1.4, ML2 = -0.8
+    names = ex.orders.names
+    errors = dict.fromkeys(names, 0.01)
+    u = np.linspace(-2.0, 2.0, 401)
+    assert not_identifiable(ex.params(), errors, u) == {}
+    # DR1 beyond the input's largest value: it and the slope change at it
+    narrow = np.linspace(-1.5, 0.95, 401)
+    found = not_identifiable(ex.params(), errors, narrow)
+    assert set(found) == {"DR1", "MR2"} and "0 input sample(s)" in found["DR1"]
+    # an infinite standard error; a slope change within two standard errors of zero
+    found = not_identifiable(ex.params(), {**errors, "a2": np.inf, "ML2": 0.5}, u)
+    assert set(found) == {"a2", "DL1"}
+    assert "infinite" in found["a2"] and "ML2" in found["DL1"]

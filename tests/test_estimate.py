@@ -8,6 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import oracle
+import pandas as pd
 import pytest
 
 import jaxcascade
@@ -273,3 +274,9 @@ def test_vmap_over_realisations_equals_loop():
         np.testing.assert_allclose(
             batched.params.to_vector()[i], one.params.to_vector(), rtol=0, atol=1e-9
         )
+    # the batch as a table: one row per record, the same as each record's own row
+    table = jaxcascade.solution_table(batched)
+    assert list(table.index) == [0, 1, 2] and table.index.name == "record"
+    for i in range(3):
+        one = jaxcascade.solution_table(jax.tree.map(lambda leaf, i=i: leaf[i], batched))
+        pd.testing.assert_series_equal(table.iloc[i], one.iloc[0], check_names=False)

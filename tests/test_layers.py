@@ -10,7 +10,7 @@ PACKAGE = pathlib.Path(__file__).parents[1] / "jaxcascade"
 
 # Lowest first, as in docs/architecture.md; a package (folder) is one room.
 LAYERS = [
-    {"_model", "_status", "_metrics", "_batching", "_version", "_linalg", "_compile"},
+    {"_model", "_status", "_metrics", "_batching", "_version", "_linalg", "_compile", "_names"},
     {"_validate"},
     {"_simulate", "_prior", "_examples"},
     {"_sensitivity"},

@@ -216,6 +216,14 @@ def test_bad_specs_fail_before_any_file_is_written(tmp_path, capsys, extra, mess
             "needs the sample sizes",
         ),
         ("example = 1\nn = 300\nsnr = [25, 25]\n", "repeats a value"),
+        # a plain value where a table belongs: the message names the key likely meant
+        ('example = 1\nn = 300\nestimator = "robust"\n', 'estimators = ["robust"]'),
+        (
+            'example = 1\nn = 300\nestimator = ["literal", "robust"]\n',
+            'estimators = ["literal", "robust"]',
+        ),
+        ("example = 1\nn = 300\ninput = 3.0\n", "[input] amplitude = 3.0"),
+        ('example = 1\nn = 300\ninput = "uniform"\n', '[input] distribution = "uniform"'),
     ],
 )
 def test_bad_spec_files(tmp_path, capsys, text, message):
@@ -302,6 +310,34 @@ def test_killed_run_resumes_to_an_identical_table(tmp_path, capsys):
     assert "1 of" in report and " cR " in report
 
 
+def test_overwrite_replaces_a_finished_run_and_says_so(tmp_path, capsys):
+    out = tmp_path / "runs" / "q.parquet"
+    argv = [
+        "sweep", "--example", "1", "--n", str(N), "--snr", "25", "--realisations", "3",
+        "--seed", "0", "--chunk-size", "3", "--out", str(out), "--overwrite",
+    ]  # fmt: skip
+    assert main(argv) == 0
+    first = capsys.readouterr().out
+    assert "replacing" not in first  # nothing to replace yet
+    table = without_timing(pd.read_parquet(out))
+    assert main(argv) == 0
+    assert f"replacing the previous '{out}'" in capsys.readouterr().out
+    pd.testing.assert_frame_equal(without_timing(pd.read_parquet(out)), table)
+    # neither flag: refused, naming both; both flags: refused
+    plain = [a for a in argv if a != "--overwrite"]
+    assert main(plain) == 2
+    assert "--overwrite" in capsys.readouterr().err
+    assert main([*argv, "--resume"]) == 2
+    assert "not both" in capsys.readouterr().err
+    # a partial folder of another spec is cleared, not continued or refused
+    other = [*plain[:8], "4", *plain[9:]]  # 4 realisations
+    (out.parent / "q.parquet.partial").mkdir()
+    (out.parent / "q.parquet.partial" / "spec.json").write_text("{}")
+    assert main([*other, "--overwrite"]) == 0
+    assert len(pd.read_parquet(out)) == 4
+    assert not (out.parent / "q.parquet.partial").exists()
+
+
 def test_chunk_memory_is_reported():
     spec = small_spec()
     sizes = chunk_memory(spec, spec.cells()[0])
@@ -327,8 +363,8 @@ def test_plots_are_written(tmp_path):
 
     paths = plot_sweep(summarise(table), table, tmp_path, "demo")
     names = sorted(pathlib.Path(p).name for p in paths)
-    kinds = ["bias", "rmse", "std"]
-    want = [f"demo_{k}_vs_{x}.png" for k in kinds for x in ("n", "snr")]
+    # two SNRs at one N: versus SNR, never versus N (tests/test_plot_sweep.py: each shape)
+    want = [f"demo_{k}_vs_snr.png" for k in ("bias", "rmse", "std")]
     want += ["demo_convergence_rate.png", "demo_distributions.png", "demo_efficiency.png"]
     assert names == sorted(want)
     assert all(pathlib.Path(p).stat().st_size > 10_000 for p in paths)

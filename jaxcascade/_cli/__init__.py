@@ -11,8 +11,10 @@ from __future__ import annotations
 import os
 import sys
 
+# Each command module imports JAX, NumPy and pandas inside the function that runs it, so
+# `--help` answers at once (tests/test_help.py holds that no help imports JAX).
 from . import _bench, _fit, _loop, _reproduce, _sweep
-from ._common import CLIError, Parser
+from ._common import CLIError, Parser, examples
 
 # Commands in the order shown by --help.
 _COMMANDS = (_reproduce, _sweep, _fit, _loop, _bench)
@@ -21,7 +23,18 @@ _COMMANDS = (_reproduce, _sweep, _fit, _loop, _bench)
 def build_parser() -> Parser:
     parser = Parser(
         prog="jaxcascade",
-        description="Identification of three-block cascade systems with backlash (Vörös 2016).",
+        description="Identification of three-block cascade systems with backlash (Vörös 2016). "
+        "'jaxcascade COMMAND --help' describes a command, its options and examples.",
+        epilog=examples(
+            "jaxcascade reproduce --example 1",
+            "jaxcascade sweep --example 1 --snr 25 --n 4000 --realisations 100 "
+            "--estimator literal,robust --out runs/quickstart.parquet --plots runs/quickstart "
+            "--overwrite",
+            "jaxcascade fit record.csv --input u --output y --decimate 8",
+            "jaxcascade loop train.csv --validate valid.csv --input u --output y "
+            "--report runs/loop",
+            "jaxcascade bench --estimator robust --system example1 --json",
+        ),
     )
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
     subparsers.required = True

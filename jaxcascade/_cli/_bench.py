@@ -7,10 +7,7 @@ import json
 import pathlib
 import time
 
-from .._benchmark import _robust as robust_bench
-from .._benchmark._timing import run_benchmark, summary
-from .._examples import example as get_example
-from .._model import Orders
+from .._names import BENCH_SYSTEMS
 from ._common import CLIError, examples, strict_json, writable_folder
 
 
@@ -64,6 +61,9 @@ def _robust_report(r: dict) -> str:
 
 
 def run_robust_bench(args) -> int:
+    from .._benchmark import _robust as robust_bench
+    from .._model import Orders
+
     n = args.n if args.n is not None else robust_bench.system_defaults(args.system)[0]
     realisations = args.realisations if args.realisations is not None else 256
     baseline = args.baseline_realisations if args.baseline_realisations is not None else 8
@@ -89,6 +89,10 @@ def run_robust_bench(args) -> int:
 
 
 def run_bench(args) -> int:
+    # imported here, not at the top: `--help` answers without importing JAX
+    from .._benchmark._timing import run_benchmark, summary
+    from .._examples import example as get_example
+
     if args.estimator == "robust":
         return run_robust_bench(args)
     if args.system != "example1":
@@ -156,7 +160,7 @@ def add_parser(subparsers) -> None:
     parser.add_argument(
         "--system",
         default="example1",
-        choices=tuple(robust_bench.SYSTEMS),
+        choices=BENCH_SYSTEMS,
         help="robust: the system (example1 N 4000 SNR 25, example2 N 2000 SNR 25, random: "
         "the random family, N 3000 SNR 30)",
     )
@@ -170,8 +174,20 @@ def add_parser(subparsers) -> None:
         metavar="N",
         help="samples per record (default 4000; robust: the system's)",
     )
-    parser.add_argument("--iterations", type=int, default=20, metavar="K")
-    parser.add_argument("--example", type=int, default=1, choices=(1, 2))
+    parser.add_argument(
+        "--iterations",
+        type=int,
+        default=20,
+        metavar="K",
+        help="literal: Vörös iterations per realisation, a fixed number (default 20)",
+    )
+    parser.add_argument(
+        "--example",
+        type=int,
+        default=1,
+        choices=(1, 2),
+        help="literal: the paper example whose records are fitted (default 1)",
+    )
     parser.add_argument(
         "--baseline-realisations",
         type=int,
@@ -191,7 +207,7 @@ def add_parser(subparsers) -> None:
     parser.add_argument(
         "--repeats", type=int, default=3, help="timed runs; the best counts (robust: 1 is enough)"
     )
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--seed", type=int, default=0, help="PRNG seed of the records (default 0)")
     parser.add_argument(
         "--backend",
         default="auto",

@@ -2,25 +2,16 @@
 
 Exit codes: 0 when the fit's status is usable (`converged`, `cycled`), `FAILED` (3) when
 it is a failure (`Status.failure`; the result is printed all the same), 2 for a bad
-request (one line on stderr, nothing fitted).
+request (one line on stderr, nothing fitted). Parameters the record does not determine
+(`_efficiency.not_identifiable`) are named in the message and the table, beside a status
+that stays the estimator's.
 """
 
 from __future__ import annotations
 
 import math
 
-import jax
-import jax.numpy as jnp
-import numpy as np
-
-from .._data import read_record
-from .._efficiency import standard_errors
-from .._estimator import ESTIMATORS, estimator
-from .._metrics import fit_percent, score
-from .._model import CascadeParams, Orders
-from .._simulate import simulate
-from .._status import Status
-from .._validate import record as checked
+from .._names import ESTIMATORS
 from ._common import (
     CLIError,
     add_record_arguments,
@@ -33,7 +24,7 @@ from ._common import (
 FAILED = 3  # exit code of a fit whose status is a failure
 
 
-def fit_record(u, y, orders: Orders, name: str = "robust", **settings):
+def fit_record(u, y, orders, name: str = "robust", **settings):
     """Fit one record with the registered estimator `name`.
 
     Returns `(solution, error, errors)`: `error` is the NRMSE of the free-run simulation
@@ -41,6 +32,17 @@ def fit_record(u, y, orders: Orders, name: str = "robust", **settings):
     the estimated standard error of every parameter (`_efficiency.standard_errors`: the
     output-error information at the estimate, sigma from the residual, white noise).
     """
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+
+    from .._efficiency import standard_errors
+    from .._estimator import estimator
+    from .._metrics import score
+    from .._model import CascadeParams
+    from .._simulate import simulate
+    from .._validate import record as checked
+
     u, y = checked(u, y, orders=orders, where="fit")
     solution = jax.device_get(estimator(name, **settings)(u, y, orders))
     vector = jnp.asarray(solution.params.to_vector(), u.dtype)
@@ -55,6 +57,13 @@ def fit_record(u, y, orders: Orders, name: str = "robust", **settings):
 
 
 def run_fit(args) -> int:
+    # imported here, not at the top: `--help` answers without importing JAX
+    from .._data import read_record
+    from .._efficiency import not_identifiable
+    from .._estimator import estimator
+    from .._metrics import fit_percent
+    from .._status import Status
+
     orders = parse_orders(args.orders)
     if args.decimate < 1:
         raise CLIError(f"--decimate must be an integer >= 1, got {args.decimate}.")
@@ -71,12 +80,19 @@ def run_fit(args) -> int:
     solution, error, errors = fit_record(record.u, record.y, orders, args.estimator)
     status = Status(int(solution.status))
     estimates = solution.params.to_dict()
+    # Which parameters the record does not determine: said beside the status (which the
+    # estimator and the sweeps share, unchanged), in the message and in the table.
+    unknown = not_identifiable(solution.params, errors, record.u) if not status.failure else {}
+    message = status.message
+    if unknown:
+        message += f" {_listed(list(unknown))} {_are(unknown)} not identifiable from this record."
     result = {
         "estimator": args.estimator,
         "status": status.name,
-        "message": status.message,
+        "message": message,
         "estimates": estimates,
         "std_errors": errors,
+        "not_identifiable": unknown,
         "nrmse": error,  # inf (null in JSON) when the estimate's simulation blows up
         "iterations": int(solution.iterations),
     }
@@ -91,11 +107,28 @@ def run_fit(args) -> int:
     print(f"{args.estimator} estimator: {status.name} after {result['iterations']} iterations")
     if status.failure:
         print(f"failed: {status.message}")
+    if unknown:
+        print(
+            f"not identifiable from this record: {_listed(list(unknown))}; the data do not "
+            f"determine {'its value' if len(unknown) == 1 else 'their values'} (why: below), "
+            "the other estimates stand"
+        )
     shown = f"{error:.4g} (fit {fit_percent(error):.1f} %)" if math.isfinite(error) else "inf"
     print(f"free-run NRMSE {shown} on {len(record)} samples")
     for name, value in estimates.items():
-        print(f"  {name:>4} = {value: .6f} ± {errors[name]:.2g}")
+        if name in unknown:
+            print(f"  {name:>4} = {value: .6f}   not identifiable: {unknown[name]}")
+        else:
+            print(f"  {name:>4} = {value: .6f} ± {errors[name]:.2g}")
     return code
+
+
+def _listed(names: list[str]) -> str:
+    return names[0] if len(names) == 1 else f"{', '.join(names[:-1])} and {names[-1]}"
+
+
+def _are(names) -> str:
+    return "is" if len(names) == 1 else "are"
 
 
 def add_parser(subparsers) -> None:

@@ -12,14 +12,7 @@ import dataclasses
 import pathlib
 import sys
 
-import numpy as np
-
-from .._arx import best_arx
-from .._data import Scaling, read_record
-from .._loop import model_error_loop
-from .._metrics import fit_percent, score
-from .._plot._loop import plot_compare
-from .._plot._residuals import save_residual_figures
+from .._names import EFFECTS, NOISE_MODEL
 from ._common import (
     CLIError,
     add_record_arguments,
@@ -31,6 +24,8 @@ from ._common import (
 
 
 def _markdown(report: dict, command: str) -> str:
+    from .._metrics import fit_percent
+
     lines = [
         "# Model-error loop report",
         "",
@@ -132,6 +127,16 @@ def _window(text, decimate: int, length: int):
 
 
 def run_loop(args) -> int:
+    # imported here, not at the top: `--help` answers without importing JAX
+    import numpy as np
+
+    from .._arx import best_arx
+    from .._data import Scaling, read_record
+    from .._loop import model_error_loop
+    from .._metrics import score
+    from .._plot._loop import plot_compare
+    from .._plot._residuals import save_residual_figures
+
     orders = parse_orders(args.orders)
     if args.max_effects < 0:
         raise CLIError(f"--max-effects must be >= 0, got {args.max_effects}.")
@@ -262,7 +267,13 @@ def add_parser(subparsers) -> None:
     )
     parser.add_argument("--validate", required=True, help="validation record")
     add_record_arguments(parser, scaling="scale")
-    parser.add_argument("--max-effects", type=int, default=3)
+    parser.add_argument(
+        "--max-effects",
+        type=int,
+        default=3,
+        help="at most this many effects are added, one per round (default 3; 0: fit and "
+        "test only)",
+    )
     parser.add_argument(
         "--window",
         default=None,
@@ -272,7 +283,8 @@ def add_parser(subparsers) -> None:
     parser.add_argument(
         "--effects",
         default=None,
-        help="NAME,NAME: the effects of the library the loop considers (default: all)",
+        help="NAME,NAME: the effects of the library the loop considers (default: all): "
+        f"{', '.join([*EFFECTS, NOISE_MODEL])}",
     )
     parser.add_argument("--report", default=None, help="folder for the report and figures")
     parser.add_argument("--json", action="store_true", help="print the JSON summary")

@@ -9,32 +9,31 @@ from __future__ import annotations
 
 import pathlib
 
-import jax
-
-from .._estimator import ESTIMATORS, Solution, estimator
-from .._examples import Example, example
-from .._plot._trajectory import plot_trajectories
-from .._simulate import measure, uniform_input
-from .._status import Status
+from .._names import ESTIMATORS
 from ._common import CLIError, estimator_help, examples, strict_json, writable_folder
 
 
 def run_example(
-    ex: Example,
+    ex,
     seed: int = 0,
     snr: float | None = None,
     dtype=None,
     name: str = "literal",
     **settings,
-) -> tuple[Solution, dict]:
+) -> tuple:
     """Simulate one record of `ex` and fit it with the registered estimator `name`
     (default: the paper's iteration from the paper's initial values).
 
     The input key and the noise key are the two halves of `PRNGKey(seed)`. `snr=inf`
     gives a noise-free record. The estimator is told the input distribution's range
     (`input_range`), so the literal iteration starts from the paper's DR1 = 1, DL1 = -1.
-    Returns the solution and the true values by name.
+    Returns the solution (`Solution`) and the true values by name.
     """
+    import jax
+
+    from .._estimator import estimator
+    from .._simulate import measure, uniform_input
+
     dtype = dtype or jax.numpy.result_type(float)
     snr = ex.snr if snr is None else snr
     key_input, key_noise = jax.random.split(jax.random.PRNGKey(seed))
@@ -46,7 +45,7 @@ def run_example(
     return jax.device_get(solution), truth.to_dict()
 
 
-def estimates_table(solution: Solution, truth: dict):
+def estimates_table(solution, truth: dict):
     """pandas DataFrame: parameter, true value, estimate, error."""
     import pandas as pd
 
@@ -71,6 +70,12 @@ def _markdown(table, header: str) -> str:
 
 
 def reproduce(args) -> int:
+    # imported here, not at the top: `--help` answers without importing JAX
+    from .._estimator import ESTIMATORS as REGISTRY
+    from .._examples import example
+    from .._plot._trajectory import plot_trajectories
+    from .._status import Status
+
     ex = example(args.example)
     if not args.snr > 0:
         raise CLIError(
@@ -81,7 +86,7 @@ def reproduce(args) -> int:
     out = pathlib.Path(args.out)
     writable_folder(out)
 
-    takes = "max_iterations" in ESTIMATORS[args.estimator].settings()
+    takes = "max_iterations" in REGISTRY[args.estimator].settings()
     settings = {"max_iterations": args.max_iterations} if takes else {}
     solution, truth = run_example(ex, args.seed, args.snr, name=args.estimator, **settings)
     status = Status(int(solution.status)).name
@@ -96,7 +101,7 @@ def reproduce(args) -> int:
     )
     table.to_csv(out / f"{tag}_estimates.csv", index=False)
     header = (
-        f"## {title}\n\nEstimator `{args.estimator}`: {ESTIMATORS[args.estimator].summary}. "
+        f"## {title}\n\nEstimator `{args.estimator}`: {REGISTRY[args.estimator].summary}. "
         f"Command: `jaxcascade reproduce --example {ex.number} --seed {args.seed} "
         f"--snr {args.snr:g} --estimator {args.estimator} --out {args.out}`"
     )

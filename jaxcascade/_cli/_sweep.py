@@ -5,12 +5,7 @@ from __future__ import annotations
 import pathlib
 import sys
 
-import pandas as pd
-
-from .._montecarlo._run import run, summary_path
-from .._montecarlo._spec import FAMILIES, Spec, read_toml
-from .._montecarlo._tables import CELL_COLUMNS, compare, read_summary, summarise
-from .._plot._sweep import plot_sweep
+from .._names import FAMILIES
 from ._common import (
     CLIError,
     estimator_help,
@@ -22,8 +17,11 @@ from ._common import (
 )
 
 
-def spec_from_args(args) -> Spec:
-    """The spec of a `sweep` command line: a TOML file, overridden by the options given."""
+def spec_from_args(args):
+    """The spec (`Spec`) of a `sweep` command line: a TOML file, overridden by the
+    options given."""
+    from .._montecarlo._spec import Spec, read_toml
+
     data = {}
     if args.spec is not None:
         data = read_toml(args.spec)
@@ -60,7 +58,7 @@ def spec_from_args(args) -> Spec:
     return Spec.from_dict(data)
 
 
-def check_baseline(spec: Spec, baseline: pd.DataFrame, path) -> None:
+def check_baseline(spec, baseline, path) -> None:
     """Refuse, before the sweep runs, a `--compare` baseline that shares no grid cell
     (system, N, SNR, estimator) and parameter with the sweep `spec` will run."""
     planned = {(spec.system, int(c.n), float(c.snr), c.estimator) for c in spec.cells()}
@@ -93,13 +91,20 @@ def check_baseline(spec: Spec, baseline: pd.DataFrame, path) -> None:
     raise CLIError(f"--compare: baseline '{path}' shares {what}; compare with a matching summary.")
 
 
-def _print_cells(summary: pd.DataFrame) -> None:
+def _print_cells(summary) -> None:
+    from .._montecarlo._tables import CELL_COLUMNS
+
     cells = summary.drop_duplicates(CELL_COLUMNS)
     columns = [*CELL_COLUMNS, "count", "used", "converged_rate", "recovered_rate", "nrmse_median"]
     print(cells[columns].to_string(index=False, float_format=lambda v: f"{v:.4g}"))
 
 
 def sweep(args) -> int:
+    # imported here, not at the top: `--help` answers without importing JAX
+    from .._montecarlo._run import run, summary_path
+    from .._montecarlo._tables import CELL_COLUMNS, compare, read_summary, summarise
+    from .._plot._sweep import plot_sweep, sweep_figures
+
     spec = spec_from_args(args)
     if args.out is None:
         if args.spec is None:
@@ -119,13 +124,29 @@ def sweep(args) -> int:
     if args.plots:
         writable_folder(args.plots, "--plots")
 
-    table = run(spec, out, resume=args.resume, progress=None, command=["jaxcascade", *sys.argv[1:]])
+    if args.resume and args.overwrite:
+        raise CLIError("give either --resume or --overwrite, not both.")
+    if args.overwrite and out.exists():
+        print(f"--overwrite: replacing the previous '{out}' and its summary and plots.")
+    table = run(
+        spec,
+        out,
+        resume=args.resume,
+        overwrite=args.overwrite,
+        progress=None,
+        command=["jaxcascade", *sys.argv[1:]],
+    )
     summary = summarise(table)
     summary.to_csv(summary_path(out), index=False)
     _print_cells(summary)
     print(f"written: {out}, {summary_path(out)}")
     if args.plots:
-        paths = plot_sweep(summary, table, args.plots, out.name.removesuffix(".parquet"))
+        stem = out.name.removesuffix(".parquet")
+        old = set(sweep_figures(args.plots, stem))
+        paths = plot_sweep(summary, table, args.plots, stem)
+        if args.overwrite:  # figures of an earlier sweep of another shape would mislead
+            for path in old - set(paths):
+                path.unlink(missing_ok=True)
         print(f"plots: {', '.join(str(p) for p in paths)}")
     if baseline is not None:
         result = compare(summary, baseline, args.threshold)
@@ -151,6 +172,9 @@ def add_parser(subparsers) -> None:
             "OUT.summary.csv; a killed run continues when started again."
         ),
         epilog=examples(
+            "jaxcascade sweep --example 1 --snr 25 --n 4000 --realisations 100 "
+            "--estimator literal,robust --out runs/quickstart.parquet --plots runs/quickstart "
+            "--overwrite",
             "jaxcascade sweep --example 1 --snr 10,25,50 --n 1000,4000 --realisations 100 "
             "--out results/ex1.parquet",
             "jaxcascade sweep spec.toml --out results/b.parquet --compare results/a.summary.csv",
@@ -190,9 +214,21 @@ def add_parser(subparsers) -> None:
     parser.add_argument(
         "--resume", action="store_true", help="reuse a finished OUT (a killed run continues anyway)"
     )
+    parser.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace a finished OUT, its summary and its plots (without --resume or "
+        "--overwrite an existing OUT is refused)",
+    )
     parser.add_argument("--compare", metavar="BASELINE", help="baseline summary to compare with")
     parser.add_argument(
         "--threshold", type=float, default=3.0, help="flag |diff| > T * combined MC error (3)"
     )
-    parser.add_argument("--plots", metavar="DIR", help="write bias/RMSE/rate plots to DIR")
+    parser.add_argument(
+        "--plots",
+        metavar="DIR",
+        help="write the figures that fit the sweep's shape to DIR (one cell: distributions "
+        "with the truth and the Cramér-Rao bound, rates, efficiency; a grid: also bias, "
+        "RMSE and std versus SNR and N)",
+    )
     parser.set_defaults(func=sweep)

@@ -14,7 +14,7 @@ from typing import Any
 from ._base import Estimator
 from ._literal import Literal
 from ._robust import Robust
-from ._solution import Solution
+from ._solution import Solution, solution_table
 
 ESTIMATORS: dict[str, type[Estimator]] = {cls.name: cls for cls in (Literal, Robust)}
 
@@ -35,4 +35,4 @@ def estimator(name: str, **settings: Any) -> Estimator:
     return cls(**settings)
 
 
-__all__ = ["ESTIMATORS", "Estimator", "Solution", "estimator"]
+__all__ = ["ESTIMATORS", "Estimator", "Solution", "estimator", "solution_table"]

@@ -1,18 +1,21 @@
-"""The result of one fit, whatever the estimator."""
+"""The result of one fit, whatever the estimator, and a batch of them as a table."""
 
 from __future__ import annotations
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Float, Int
 
 from .._model import CascadeParams
-from .._status import Status
+from .._status import Status, status_names
 
 # `Solution.path`: which of an estimator's paths gave the estimate.
 PATH_ONLY = 0  # the estimator has one path (the literal iteration)
 PATH_ADAPTIVE = 1  # robust: the literal estimate, refined, passed the residual test
 PATH_MULTISTART = 2  # robust: the multi-start fallback
+PATH_NAMES = ("only", "adaptive", "multistart")
 
 
 class Solution(eqx.Module):
@@ -39,6 +42,56 @@ class Solution(eqx.Module):
     status: Int[Array, ""]
     cycle_amplitude: Float[Array, ""]
     path: Int[Array, ""]
+
+    def to_frame(self):
+        """A pandas DataFrame, one row per record: `solution_table(self)`."""
+        return solution_table(self)
+
+
+def solution_table(solution):
+    """A `Solution` of any batch shape (after `jax.vmap`, nested too, or none) as a pandas
+    DataFrame with one row per record: the estimate by parameter name, `status` (the
+    name), `iterations`, `cost`, `cycle_amplitude` and `path` (`only`, `adaptive` or
+    `multistart`). The index is the record's position in the batch: `record` for one
+    batch axis, levels `axis0`, `axis1`, ... for nested batches, a single row 0 for an
+    unbatched solution. A `CascadeParams` (of any batch shape) gives the estimate columns
+    alone. Host side: call it outside `jit`.
+    """
+    import pandas as pd
+
+    params = solution.params if isinstance(solution, Solution) else solution
+    if not isinstance(params, CascadeParams):
+        raise TypeError(
+            f"solution_table takes a Solution or CascadeParams, not {type(solution).__name__}."
+        )
+    vector = np.asarray(jax.device_get(params.to_vector()), dtype=float)
+    batch = vector.shape[:-1]
+    columns = dict(zip(params.names, vector.reshape(-1, vector.shape[-1]).T, strict=True))
+    if isinstance(solution, Solution):
+        fields = jax.device_get(solution)
+
+        def flat(values):
+            return np.broadcast_to(np.asarray(values), batch).reshape(-1)
+
+        codes = flat(fields.status)
+        paths = flat(fields.path)
+        names = np.array([*PATH_NAMES, "unknown"], dtype=object)
+        columns |= {
+            "status": status_names(codes),
+            "iterations": flat(fields.iterations).astype(int),
+            "cost": flat(fields.cost).astype(float),
+            "cycle_amplitude": flat(fields.cycle_amplitude).astype(float),
+            "path": names[np.where((paths >= 0) & (paths < len(PATH_NAMES)), paths, -1)],
+        }
+    if len(batch) == 0:
+        index = pd.RangeIndex(1)
+    elif len(batch) == 1:
+        index = pd.RangeIndex(batch[0], name="record")
+    else:
+        index = pd.MultiIndex.from_product(
+            [range(size) for size in batch], names=[f"axis{k}" for k in range(len(batch))]
+        )
+    return pd.DataFrame(columns, index=index)
 
 
 def finite(solution: Solution, fallback: Float[Array, " P"]) -> Solution:

@@ -40,6 +40,14 @@ def _check_same(stored: dict, expected: dict, where) -> None:
         )
 
 
+def _same(stamp: pathlib.Path, identity: dict) -> bool:
+    try:
+        _check_same(json.loads(stamp.read_text()), identity, stamp)
+    except (OSError, ValueError):
+        return False
+    return True
+
+
 def _done(folder: pathlib.Path) -> pd.DataFrame | None:
     files = sorted(folder.glob("chunk-*.parquet"))
     if not files:
@@ -72,14 +80,22 @@ def _chunks(spec: Spec, done: pd.DataFrame | None):
 
 
 def run(
-    spec: Spec, out=None, *, resume: bool = False, progress: bool | None = None, command=None
+    spec: Spec,
+    out=None,
+    *,
+    resume: bool = False,
+    overwrite: bool = False,
+    progress: bool | None = None,
+    command=None,
 ) -> pd.DataFrame:
     """Run every cell of `spec`; returns the realisation table (rows in `spec.cells()` order).
 
     With `out` (a `.parquet` path) every chunk is written to `OUT.partial/` as it
     finishes, and merged into `out` (with metadata) at the end. If `OUT.partial/` exists
     the run continues it (its spec and dtype must match); an existing complete `out` is
-    an error unless `resume`, which reuses it. `progress=None` shows a bar on a terminal.
+    an error unless `resume`, which reuses it, or `overwrite`, which deletes it (and an
+    `OUT.partial/` of another spec) and runs afresh; an `OUT.partial/` of the same spec is
+    continued either way. `progress=None` shows a bar on a terminal.
 
     With `spec.scheduler` the chunks run on that Dask cluster (`_distributed`), arriving
     in any order; the table is the same as in this process.
@@ -97,15 +113,24 @@ def run(
                 bar.update(len(indices))
         return _ordered(spec, pd.concat(frames, ignore_index=True))
 
+    if resume and overwrite:
+        raise ValueError("give either --resume or --overwrite, not both.")
     out = pathlib.Path(out)
     folder = _partial_folder(out)
     identity = _identity(spec, dtype)
     stamp = folder / "spec.json"
+    if overwrite:
+        out.unlink(missing_ok=True)
+        if folder.exists() and not _same(stamp, identity):
+            shutil.rmtree(folder)
     if folder.exists() and stamp.exists():
         _check_same(json.loads(stamp.read_text()), identity, folder)
     elif out.exists():
         if not resume:
-            raise ValueError(f"'{out}' already exists; pass --resume to reuse it or delete it.")
+            raise ValueError(
+                f"'{out}' already exists; pass --resume to reuse it, --overwrite to replace "
+                "it, or delete it."
+            )
         meta = read_metadata(out)
         _check_same(
             {"spec": _without_chunk(meta.get("spec")), "dtype": meta.get("dtype")}, identity, out

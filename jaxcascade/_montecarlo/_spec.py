@@ -364,6 +364,26 @@ class Spec:
         return cls.from_dict(read_toml(path))
 
 
+def _meant(name: str, value) -> str:
+    """What a plain value where a table belongs was most likely meant to say (a clause)."""
+    shown = f"{value!r}" if not isinstance(value, str) else f'"{value}"'
+    if name == "estimator":  # the settings table, confused with the list of estimators
+        names = [value] if isinstance(value, str) else value
+        if isinstance(names, list) and all(isinstance(n, str) for n in names):
+            listed = ", ".join(f'"{n}"' for n in names)
+            return (
+                f" of settings per estimator ([estimator.robust] n_starts = 8); to choose "
+                f"the estimators write estimators = [{listed}]"
+            )
+        return " of settings per estimator ([estimator.robust] n_starts = 8)"
+    if name == "input":
+        key = "distribution" if isinstance(value, str) else "amplitude"
+        return f"; did you mean [input] {key} = {shown}?"
+    if name == "system":
+        return f'; did you mean [system] params = {{...}} or system = "random", not {shown}?'
+    return ""
+
+
 def read_toml(path) -> dict:
     """The contents of a TOML spec file; a `ValueError` naming the file when it is
     missing or not TOML."""
@@ -379,7 +399,10 @@ def read_toml(path) -> dict:
 
 def _table(value, name, allowed) -> dict:
     if not isinstance(value, Mapping):
-        raise ValueError(f"Spec field {name!r} must be a table.")
+        hint = _meant(name, value)
+        raise ValueError(
+            f"Spec field {name!r} must be a table{hint}{'' if hint[-1:] == '?' else '.'}"
+        )
     if allowed is not None:
         unknown = [key for key in value if key not in allowed]
         if unknown:

@@ -1,0 +1,28 @@
+"""`_names` (the registries' names, for `--help` without JAX) equals each registry, and the
+README's list of the loop's effects is the library's."""
+
+import pathlib
+import re
+
+from jaxcascade import _names
+from jaxcascade._benchmark._robust import SYSTEMS
+from jaxcascade._effects import EFFECTS
+from jaxcascade._estimator import ESTIMATORS
+from jaxcascade._montecarlo._spec import FAMILIES
+from jaxcascade._noise import ARNoise
+
+README = pathlib.Path(__file__).parents[1] / "README.md"
+
+
+def test_names_equal_the_registries():
+    assert _names.ESTIMATORS == {name: cls.summary for name, cls in ESTIMATORS.items()}
+    assert _names.EFFECTS == tuple(EFFECTS)
+    assert _names.NOISE_MODEL == ARNoise.name
+    assert _names.FAMILIES == tuple(FAMILIES)
+    assert _names.BENCH_SYSTEMS == tuple(SYSTEMS)
+
+
+def test_readme_lists_the_loops_effects():
+    text = " ".join(README.read_text().split())
+    listed = text.split("Otherwise each effect of the library (", 1)[1].split(")", 1)[0]
+    assert re.findall(r"`([a-z_]+)`", listed) == [*EFFECTS, ARNoise.name]
