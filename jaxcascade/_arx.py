@@ -20,9 +20,21 @@ class ARX:
     b: np.ndarray  # (nb,)
     c: float
 
-    def simulate(self, u) -> np.ndarray:
-        """Free-run simulation from rest."""
+    def simulate(self, u, y=None, start: int = 0) -> np.ndarray:
+        """Free-run simulation from rest; with the measured output `y`, its samples before
+        `start` set the model's state (its past outputs) and the simulation runs free
+        from `start` on (the samples before it are `y`'s)."""
         u = np.asarray(u, float)
+        if y is not None and start > 0:
+            out = np.array(y, float, copy=True)
+            na, nb = len(self.a), len(self.b)
+            for t in range(start, len(u)):
+                past_y = (
+                    out[t - na : t][::-1] if t >= na else np.r_[out[:t][::-1], np.zeros(na - t)]
+                )
+                past_u = u[t - nb : t][::-1] if t >= nb else np.r_[u[:t][::-1], np.zeros(nb - t)]
+                out[t] = -self.a @ past_y + self.b @ past_u + self.c
+            return out
         den = np.concatenate([[1.0], self.a])
         num = np.concatenate([[0.0], self.b])
         return scipy.signal.lfilter(num, den, u) + scipy.signal.lfilter(

@@ -75,6 +75,11 @@ def _simulate(model: ExtendedModel, u):
     return tuple(np.asarray(a)[: u.shape[0]] for a in out)
 
 
+def simulated_output(model: ExtendedModel, u) -> np.ndarray:
+    """The model's output simulated from rest on one record (NumPy)."""
+    return _simulate(model, u)[0]
+
+
 def _parallel(effect: Effect, u) -> np.ndarray:
     """`effect.parallel(u)` of one record (host side, padded like `_simulate`)."""
     u = np.asarray(u)

@@ -23,43 +23,74 @@ from ._common import (
 )
 
 
+def _f(value) -> str:
+    return "-" if value is None else f"{value:.4f}"
+
+
 def _markdown(report: dict, command: str) -> str:
     from .._metrics import fit_percent
 
-    lines = [
-        "# Model-error loop report",
+    lines = ["# Model-error loop report", ""]
+    # First: the final model against the trivial ones, on every scored record.
+    lines += [*(f"**{sentence}**" for sentence in report["verdict"])]
+    if not report["verdict"]:
+        lines.append(
+            "The final model is better than the mean of the output (NRMSE 1) and than the "
+            "linear ARX peer on every scored record."
+        )
+    lines += [
+        "",
+        f"State initialisation: {report['init_samples']} samples of the measured output "
+        "before the scored ones set each model's state (never its parameters); the "
+        "from-rest figures simulate the whole record from rest. NRMSE is normalised by "
+        "the output's standard deviation: 1 is the mean.",
+        "",
+        "| record | role | model | window NRMSE | window, from rest | NRMSE | NRMSE, from rest |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for row in report["scores"]:
+        lines.append(
+            f"| {row['record']} | {row['role']} | {row['model']} | {_f(row['window_error'])} | "
+            f"{_f(row['window_error_from_rest'])} | {_f(row['error'])} | "
+            f"{_f(row['error_from_rest'])} |"
+        )
+    lines += [
+        "",
+        "The validation record chose among the candidates: only a test record's figure is "
+        "out of sample.",
         "",
         f"Command: `{command}`",
         "",
-        f"- validation NRMSE before: {report['error_before']:.4f} "
-        f"(fit {fit_percent(report['error_before']):.1f} %)",
-        f"- validation NRMSE after: {report['error_after']:.4f} "
-        f"(fit {fit_percent(report['error_after']):.1f} %)",
-        f"- effects added: {', '.join(report['effect_added']) or 'none'}",
+        f"- structure before: `{report['structure_before']}`",
+        f"- structure after: `{report['structure_after']}`",
+        "- what the loop did: "
+        + (
+            ", ".join(
+                f"{a['action']} {a['effect']} (round {a['round']})" for a in report["actions"]
+            )
+            or "nothing"
+        ),
+        f"- validation NRMSE from rest before: {report['error_before_from_rest']:.4f} "
+        f"(fit {fit_percent(report['error_before_from_rest']):.1f} %), after: "
+        f"{report['error_after_from_rest']:.4f} "
+        f"(fit {fit_percent(report['error_after_from_rest']):.1f} %)",
         f"- one-step-ahead prediction NRMSE before: {report['prediction_error_before']:.4f}, "
         f"after: {report['prediction_error_after']:.4f}",
+        f"- compiled programs: {report['programs_compiled']}",
     ]
     if report.get("window"):
-        lines.append(
-            f"- window {report['window']['stored']} (stored samples): NRMSE before "
-            f"{report['window_error_before']:.4f}, after {report['window_error_after']:.4f}"
-        )
+        lines.append(f"- window {report['window']['stored']} (stored samples)")
     lines += [
+        "",
+        "Each step of the loop on the validation record, simulated from rest:",
         "",
         "| model | NRMSE | prediction NRMSE | window NRMSE |",
         "|---|---|---|---|",
     ]
     for step in report["steps"]:
-        w = step["window_error"]
         lines.append(
             f"| {step['model']} | {step['error']:.4f} | {step['prediction_error']:.4f} | "
-            f"{'-' if w is None else f'{w:.4f}'} |"
-        )
-    if "arx" in report:
-        arx = report["arx"]
-        lines.append(
-            f"- linear ARX peer (na={arx['na']}, nb={arx['nb']}): NRMSE {arx['error']:.4f} "
-            f"(fit {fit_percent(arx['error']):.1f} %)"
+            f"{_f(step['window_error'])} |"
         )
     test = report["significance"]
     lines += [
@@ -72,13 +103,13 @@ def _markdown(report: dict, command: str) -> str:
         f"{100 * test['min_gain']:g} %. Loss: the simulation error for an effect, the "
         "one-step-ahead prediction error for the noise model.",
         "",
-        "| round | effect | variant | NRMSE | prediction NRMSE | loss | DM | L | p | "
+        "| round | effect | action | variant | NRMSE | prediction NRMSE | loss | DM | L | p | "
         "significant | signature matches |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for c in report["candidates"]:
         lines.append(
-            f"| {c['round']} | {c['name']} | {c['variant']} | {c['error']:.4f} | "
+            f"| {c['round']} | {c['name']} | {c['action']} | {c['variant']} | {c['error']:.4f} | "
             f"{c['prediction_error']:.4f} | {c['loss']} | {c['t']:.2f} | {c['bandwidth']} | "
             f"{c['p_value']:.2g} | {c['significant']} | {c['signature_match']} |"
         )
@@ -106,7 +137,7 @@ def _p(test) -> str:
     return f"{p:.3g} {mark}" if p is not None else mark
 
 
-def _window(text, decimate: int, length: int):
+def _window(text, decimate: int, length: int, option: str = "--window"):
     """`--window START:STOP` (samples of the stored file) in samples of the decimated
     record, or None."""
     if text is None:
@@ -114,16 +145,31 @@ def _window(text, decimate: int, length: int):
     try:
         start, stop = (int(part) for part in text.split(":"))
     except ValueError:
-        raise CLIError(f"--window takes START:STOP in samples, got {text!r}.") from None
+        raise CLIError(f"{option} takes START:STOP in samples, got {text!r}.") from None
     first, last = start // decimate, -(-stop // decimate)
     if not 0 <= start < stop or last > length:
         raise CLIError(
-            f"--window {text}: needs 0 <= START < STOP within the validation record "
+            f"{option} {text}: needs 0 <= START < STOP within the scored record "
             f"({length * decimate} samples as stored)."
         )
     if last - first < 2:
-        raise CLIError(f"--window {text}: fewer than 2 samples after decimation by {decimate}.")
+        raise CLIError(f"{option} {text}: fewer than 2 samples after decimation by {decimate}.")
     return first, last
+
+
+def _windows(texts, decimate: int, records) -> list:
+    """`--test-window` values, one per test record (or none): decimated windows."""
+    if not texts:
+        return [None] * len(records)
+    if len(texts) != len(records):
+        raise CLIError(
+            f"--test-window takes one START:STOP per --test record ({len(records)}), "
+            f"got {len(texts)}."
+        )
+    return [
+        _window(text, decimate, len(r), "--test-window")
+        for text, r in zip(texts, records, strict=True)
+    ]
 
 
 def run_loop(args) -> int:
@@ -132,16 +178,18 @@ def run_loop(args) -> int:
 
     from .._arx import best_arx
     from .._data import Scaling, read_record
-    from .._loop import model_error_loop
-    from .._metrics import score
+    from .._loop import initialised_output, model_error_loop, simulated_output
     from .._plot._loop import plot_compare
     from .._plot._residuals import save_residual_figures
+    from .._scoring import score_record, verdict
 
     orders = parse_orders(args.orders)
     if args.max_effects < 0:
         raise CLIError(f"--max-effects must be >= 0, got {args.max_effects}.")
     if args.decimate < 1:
         raise CLIError(f"--decimate must be an integer >= 1, got {args.decimate}.")
+    if args.init_samples < 0:
+        raise CLIError(f"--init-samples must be >= 0, got {args.init_samples}.")
     options = dict(time_column=args.time, decimate=args.decimate, orders=orders)
     raw = [
         read_record(path, args.input, args.output, scaling="none", **options) for path in args.train
@@ -157,6 +205,11 @@ def run_loop(args) -> int:
     ]
     validation = read_record(args.validate, args.input, args.output, scaling=scaling, **options)
     window = _window(args.window, args.decimate, len(validation))
+    tests = [
+        read_record(path, args.input, args.output, scaling=scaling, **options)
+        for path in args.test or []
+    ]
+    test_windows = _windows(args.test_window, args.decimate, tests)
     if args.report:
         writable_folder(args.report, "--report")
 
@@ -179,14 +232,59 @@ def run_loop(args) -> int:
     full = result.to_dict()
     # The ARX peer is fitted on the estimation records joined end to end.
     arx = best_arx(np.concatenate([r.u for r in training]), np.concatenate([r.y for r in training]))
-    arx_val = arx.simulate(validation.u)
+    say("scoring on the validation and test records (initialised and from rest)")
+    models = {
+        "declared cascade": (
+            lambda u, m=result.base: simulated_output(m, u),
+            lambda u, y, start, n, m=result.base: initialised_output(m, u, y, start, n),
+        ),
+        "final model": (
+            lambda u: simulated_output(result.final, u),
+            lambda u, y, start, n: initialised_output(result.final, u, y, start, n),
+        ),
+        "linear ARX": (
+            arx.simulate,
+            lambda u, y, start, n: arx.simulate(u, y, start)[start:],
+        ),
+    }
+    scored = [("validation", validation, window)]
+    scored += [("test", r, w) for r, w in zip(tests, test_windows, strict=True)]
+    scores = [
+        score_record(name, record.name, role, record.u, record.y, *pair, w, args.init_samples)
+        for role, record, w in scored
+        for name, pair in models.items()
+    ]
+    by_model = {name: [s for s in scores if s.model == name] for name in models}
+    warnings = verdict(by_model["final model"], by_model["linear ARX"])
+    valid = {s.model: s for s in scores if s.role == "validation"}
+    full["init_samples"] = args.init_samples
+    for key, model in (("before", "declared cascade"), ("after", "final model")):
+        s = valid[model]
+        full[f"error_{key}"] = s.error
+        full[f"window_error_{key}"] = s.window_error
+        full[f"error_{key}_from_rest"] = s.error_from_rest
+        full[f"window_error_{key}_from_rest"] = s.window_error_from_rest
+    full["scores"] = [s.to_dict() for s in scores]
+    full["test"] = [
+        {
+            "record": s.record,
+            "error": s.error,
+            "window_error": s.window_error,
+            "error_from_rest": s.error_from_rest,
+            "window_error_from_rest": s.window_error_from_rest,
+        }
+        for s in by_model["final model"]
+        if s.role == "test"
+    ]
+    full["verdict"] = warnings
+    a = valid["linear ARX"]
     full["arx"] = {
         "na": arx.orders[0],
         "nb": arx.orders[1],
-        "error": score(validation.y, arx_val),
-        "window_error": None
-        if window is None
-        else score(validation.y[slice(*window)], arx_val[slice(*window)]),
+        "error": a.error,
+        "window_error": a.window_error,
+        "error_from_rest": a.error_from_rest,
+        "window_error_from_rest": a.window_error_from_rest,
     }
     full["window"] = (
         None if window is None else {"stored": args.window, "model_samples": list(window)}
@@ -194,42 +292,77 @@ def run_loop(args) -> int:
     full["records"] = {
         "estimation": [r.to_dict() for r in training],
         "validation": validation.to_dict(),
+        "test": [r.to_dict() for r in tests],
     }
-    keys = ("error_before", "error_after", "prediction_error_before", "prediction_error_after")
-    keys += ("effect_added", "significance", "candidates", "residual_tests")
-    keys += ("standard_errors_after",)
+    keys = ("error_before", "error_after", "error_before_from_rest", "error_after_from_rest")
+    keys += ("prediction_error_before", "prediction_error_after", "init_samples")
+    keys += ("effect_added", "actions", "structure_before", "structure_after")
+    keys += ("significance", "candidates", "residual_tests", "standard_errors_after")
+    keys += ("test", "verdict", "programs_compiled")
     if window is not None:
         keys += ("window_error_before", "window_error_after")
-    if args.json:
-        print(strict_json({key: full[key] for key in keys}))
-    else:
-        print(
-            f"validation NRMSE before {full['error_before']:.4f}, after "
-            f"{full['error_after']:.4f}; added: {', '.join(full['effect_added']) or 'none'}; "
-            f"ARX peer {full['arx']['error']:.4f}"
-        )
-    if args.report:
-        folder = pathlib.Path(args.report)
+        keys += ("window_error_before_from_rest", "window_error_after_from_rest")
+    folder = pathlib.Path(args.report) if args.report else None
+    if folder is not None:
         command = "jaxcascade loop " + " ".join(sys.argv[2:])
         (folder / "report.json").write_text(strict_json(full, indent=1))
         (folder / "report.md").write_text(_markdown(full, command))
         import pandas as pd
 
         pd.DataFrame(full["candidates"]).to_csv(folder / "candidates.csv", index=False)
+        pd.DataFrame(full["scores"]).to_csv(folder / "scores.csv", index=False)
         period = validation.sample_period
         time = np.arange(len(validation)) * (period or 1.0)
+        scored_from = window[0] if window is not None else args.init_samples
+        init_from = max(scored_from - args.init_samples, 0)
         plot_compare(
             time,
             validation.y,
             result.before.simulated,
-            result.after.simulated,
+            result.after.simulated if result.added else None,
             folder / "compare.png",
-            arx=arx_val,
-            title="validation record (model units): measured vs free-run simulation",
+            arx=arx.simulate(validation.u),
+            title=f"validation record {validation.name}: measured vs free-run simulation",
+            units=_units(args.output, args.scaling),
+            init=(time[init_from], time[scored_from]) if scored_from > init_from else None,
+            scored=(time[scored_from], time[(window[1] if window else len(time)) - 1]),
         )
         save_residual_figures(result.before.tests, folder, prefix="residual_before_")
-        save_residual_figures(result.after.tests, folder, prefix="residual_after_")
+        if result.added:
+            save_residual_figures(result.after.tests, folder, prefix="residual_after_")
+    if args.json:
+        print(strict_json({key: full[key] for key in keys}))
+    else:
+        print(_summary(full, folder))
+    for sentence in warnings:
+        print(sentence, file=sys.stderr if args.json else sys.stdout)
     return 0
+
+
+def _units(column: str, scaling: str) -> str:
+    if scaling == "none":
+        return column
+    return f"{column}, model units ({scaling}d; report.json: records.*.scaling)"
+
+
+def _summary(full: dict, folder) -> str:
+    """The lines stdout ends with: structure, window figures, the report's path."""
+    lines = [
+        f"structure: {full['structure_after']}",
+        "effects: "
+        + (", ".join(f"{a['action']} {a['effect']}" for a in full["actions"]) or "none"),
+    ]
+    for row in [r for r in full["scores"] if r["model"] != "declared cascade"]:
+        w, wr = row["window_error"], row["window_error_from_rest"]
+        figure = (
+            f"window NRMSE {w:.4f} (from rest {wr:.4f})"
+            if w is not None
+            else f"NRMSE {row['error']:.4f} (from rest {row['error_from_rest']:.4f})"
+        )
+        lines.append(f"{row['role']} {row['record']}: {row['model']} {figure}")
+    if folder is not None:
+        lines.append(f"report: {folder / 'report.md'}")
+    return "\n".join(lines)
 
 
 def _effects(text: str | None) -> tuple[str, ...] | None:
@@ -271,8 +404,7 @@ def add_parser(subparsers) -> None:
         "--max-effects",
         type=int,
         default=3,
-        help="at most this many effects are added, one per round (default 3; 0: fit and "
-        "test only)",
+        help="at most this many effects are added, one per round (default 3; 0: fit and test only)",
     )
     parser.add_argument(
         "--window",
@@ -285,6 +417,31 @@ def add_parser(subparsers) -> None:
         default=None,
         help="NAME,NAME: the effects of the library the loop considers (default: all): "
         f"{', '.join([*EFFECTS, NOISE_MODEL])}",
+    )
+    parser.add_argument(
+        "--test",
+        nargs="+",
+        default=None,
+        metavar="FILE",
+        help="test record(s): scored with the final model only, used neither for fitting nor "
+        "for choosing candidates (the only out-of-sample figures when the validation record "
+        "chose the model)",
+    )
+    parser.add_argument(
+        "--test-window",
+        nargs="+",
+        default=None,
+        metavar="START:STOP",
+        help="one scoring window per --test record, in samples of the file as stored",
+    )
+    parser.add_argument(
+        "--init-samples",
+        type=int,
+        default=50,
+        help="N: on every scored record the model's state (never its parameters) is set "
+        "from the measured output on the N samples (after decimation) before the scored "
+        "ones, the nonlinear benchmarks' convention; from-rest figures are reported beside "
+        "(default 50; 0 scores from rest only)",
     )
     parser.add_argument("--report", default=None, help="folder for the report and figures")
     parser.add_argument("--json", action="store_true", help="print the JSON summary")
