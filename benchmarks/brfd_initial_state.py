@@ -3,12 +3,15 @@ on the other design-basis earthquake, initialised from the n samples before the 
 (`_initial_state.scored`) and from rest.
 
     python benchmarks/brfd_initial_state.py [--data ../shared/data/brfd] [--decimate 16]
-        [--n 50] [--effect backlash_friction] [--out results/brfd_backlash/initial_state.md]
+        [--n 50[,20,...]] [--effect backlash_friction]
+        [--out results/brfd_backlash/initial_state.md]
 
 The model is `benchmarks/brfd_effect.py`'s: the effect alone (`fit_records` on the raw
 force of the 30 lb harmonic tests and one earthquake), here as an `ExtendedModel` whose
 cascade outputs zero and carries no state (all slopes 0, gaps 0), so that the only state
-an initialisation sets is the effect's (the rotor's position). Both directions.
+an initialisation sets is the effect's (the rotor's position). Both directions; one row
+per number of initialisation samples `n` (the convention's is 50; the others show how much
+the figure depends on it).
 """
 
 from __future__ import annotations
@@ -23,7 +26,7 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", default="../shared/data/brfd")
     parser.add_argument("--decimate", type=int, default=16)
-    parser.add_argument("--n", type=int, default=50)
+    parser.add_argument("--n", default="50", help="comma-separated")
     parser.add_argument("--effect", default="backlash_friction")
     parser.add_argument("--out", default=None)
     args = parser.parse_args(argv)
@@ -56,9 +59,9 @@ def main(argv=None) -> int:
     cascade = CascadeParams.from_dict(zero, Orders(1, 1, 1, 0))
     cls = EFFECTS[args.effect]
     lines = [
-        f"| effect | estimation | validation | window | window NRMSE initialised (n = "
-        f"{args.n}) | from rest | one-step NRMSE initialised | from rest | seconds | fitted |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "| effect | estimation | validation | window | n | window NRMSE initialised | "
+        "from rest | one-step NRMSE initialised | from rest | seconds | fitted |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for train, valid in (("imperialvalley", "kocaeli"), ("kocaeli", "imperialvalley")):
         records = [(u, y, y) for u, y in [*harmonics, quakes[train]]]
@@ -66,16 +69,17 @@ def main(argv=None) -> int:
         model = ExtendedModel(cascade, (effect,), ARNoise.white())
         u, y = quakes[valid]
         a, b = WINDOWS[valid][0] // args.decimate, -(-WINDOWS[valid][1] // args.decimate)
-        started = time.perf_counter()
-        result = scored(model, jnp.asarray(u), jnp.asarray(y), a, b, n=args.n)
-        seconds = time.perf_counter() - started
-        lines.append(
-            f"| {args.effect} | 30 lb harmonics + {train} | {valid} | {a}:{b} | "
-            f"{result.error:.3f} | {result.error_from_rest:.3f} | "
-            f"{result.prediction_error:.3f} | {result.prediction_error_from_rest:.3f} | "
-            f"{seconds:.1f} | {label}, offset={float(effect.offset):.3g} |"
-        )
-        print(lines[-1], flush=True)
+        for n in (int(v) for v in args.n.split(",")):
+            started = time.perf_counter()
+            result = scored(model, jnp.asarray(u), jnp.asarray(y), a, b, n=n)
+            seconds = time.perf_counter() - started
+            lines.append(
+                f"| {args.effect} | 30 lb harmonics + {train} | {valid} | {a}:{b} | {n} | "
+                f"{result.error:.3f} | {result.error_from_rest:.3f} | "
+                f"{result.prediction_error:.3f} | {result.prediction_error_from_rest:.3f} | "
+                f"{seconds:.1f} | {label}, offset={float(effect.offset):.3g} |"
+            )
+            print(lines[-1], flush=True)
     command = (
         f"python benchmarks/brfd_initial_state.py --data {args.data} --decimate "
         f"{args.decimate} --n {args.n} --effect {args.effect}"

@@ -23,8 +23,10 @@ score covers `[start, stop)`.
   Starts: the state reached by simulating
   from rest up to `start - n`, and for each effect with positions a grid over their
   admissible range (operators are non-smooth in their state, so a local fit from one
-  start can stop at a kink); the best fit is kept. The noise model's innovations over
-  the scored samples use the residuals of the `n` initialisation samples as their past.
+  start can stop at a kink), each also with the backlash output that gives the measured
+  output at the first sample (held, the backlash is flat in the linear block's state);
+  the best fit is kept. The noise model's innovations over the scored samples use the
+  residuals of the `n` initialisation samples as their past.
 - `scored`: NRMSE (`_metrics.score`) over `[start, stop)`, initialised and from rest
   (the whole record simulated from rest, scored on the same samples), and the same for
   the one-step prediction error (the innovations).
@@ -235,7 +237,6 @@ def _fit(model: ExtendedModel, u, y, first, n: int, grid: tuple, max_steps: int)
     rest = rest_state(model, u)
     y_rest, _, y_cascade_rest, warm = simulate_from(model, u, rest, at=first)
     residual_rest = y - y_rest
-    warm = eqx.tree_at(lambda s: s.noise, warm, recent(rest.noise, residual_rest, first))
     u_init = jax.lax.dynamic_slice(u, (first,), (n,))
     y_init = jax.lax.dynamic_slice(y, (first,), (n,))
     # the record's scale (a flat initialisation window has none of its own)
@@ -257,6 +258,8 @@ def _fit(model: ExtendedModel, u, y, first, n: int, grid: tuple, max_steps: int)
     best = jnp.argmin(jnp.where(jnp.isfinite(cost), cost, jnp.inf))
     state = _with_free(warm, unravel(z[best]))
     y_shifted = simulate_from(model, _shifted(u, first), state)[0]
+    # the noise past before `first` is zero (nothing was simulated before it); the
+    # scored samples' innovations use the residuals of the n samples (n >= the order)
     w_shifted = innovations_from(model, _shifted(y, first) - y_shifted, state.noise)
     return _Fit(
         state,
@@ -312,8 +315,11 @@ def initialise(
         raise ValueError(
             f"initialise: u and y must be 1-D of equal length, got {u.shape}, {y.shape}."
         )
-    if not 0 < n < T:
-        raise ValueError(f"initialise: n must be between 1 and the record's length - 1, got {n}.")
+    if not model.noise.order <= n < T or n < 1:
+        raise ValueError(
+            f"initialise: n must be at least 1 and the noise model's order "
+            f"({model.noise.order}) and below the record's length ({T}), got {n}."
+        )
     start = min(max(int(start), n), T)
     first = start - n
     length = bucket(T)
