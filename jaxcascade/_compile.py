@@ -32,6 +32,7 @@ import os
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 OPTIONS = {
     "xla_cpu_use_fusion_emitters": False,
@@ -82,3 +83,83 @@ def jit(function=None, **kwargs):
 
     call.lower = lambda *args, **kw: compiled(top(args, kw)).lower(*args, **kw)
     return call
+
+
+# -- Bounded compilation -------------------------------------------------------------
+#
+# Every compiled program stays in memory, and in the process's memory mappings (about
+# three per program; Linux allows 65,530 per process), until JAX's caches release it.
+# A long host-side loop over records of many lengths (the model-error loop) compiles
+# one program per shape: record lengths are rounded up to a few buckets
+# (`bucket_length`, `pad`), and `release` frees what a finished stage compiled.
+
+_BACKEND_COMPILE = "/jax/core/compile/backend_compile_duration"
+_compiles = 0
+_listening = False
+
+
+def _count(event: str, duration: float, **kwargs) -> None:
+    global _compiles
+    if event == _BACKEND_COMPILE:
+        _compiles += 1
+
+
+def compile_count() -> int:
+    """Programs XLA has compiled in this process since the first call (a listener on
+    JAX's monitoring events, installed on that call)."""
+    global _listening
+    if not _listening:
+        jax.monitoring.register_event_duration_secs_listener(_count)
+        _listening = True
+    return _compiles
+
+
+def bucket_length(n: int, bits: int = 3) -> int:
+    """`n` rounded up to a number with `bits` significant bits (at most `2^(1-bits)`
+    longer: a quarter with 3 bits): lengths that differ a little share a bucket, and
+    every octave holds `2^(bits-1)` of them."""
+    n = int(n)
+    if n <= 2**bits:
+        return max(n, 1)
+    step = 1 << (n.bit_length() - bits)
+    return -(-n // step) * step
+
+
+def pad(u, length: int | None = None):
+    """A 1-D record padded at its end to `length` (default `bucket_length(len(u))`) by
+    repeating its last sample, a NumPy array. Causal models simulated on it give the
+    same output on the record's own samples; an operator driven by the increments of
+    its input sees none in the padding."""
+    u = np.asarray(u)
+    length = bucket_length(u.shape[0]) if length is None else int(length)
+    if length == u.shape[0]:
+        return u
+    return np.concatenate([u, np.full(length - u.shape[0], u[-1], u.dtype)])
+
+
+def release() -> None:
+    """Free every compiled program JAX holds (its caches): what a finished stage of a
+    long host-side loop compiled. Later calls compile again what they need."""
+    import gc
+
+    jax.clear_caches()
+    gc.collect()
+
+
+def pack(us, ys, dtype=None) -> tuple:
+    """Records grouped by length bucket (`_compile.bucket_length`): a tuple of `(U, Y, M)`
+    per bucket, each `(R, L)`: inputs and outputs padded by their last sample, and a
+    mask (1 on a record's own samples). A program over the groups is compiled once for
+    any records of the same buckets, and simulates each group in one batched scan."""
+    dtype = dtype or jnp.asarray(us[0]).dtype
+    groups: dict[int, list] = {}
+    for u, y in zip(us, ys, strict=True):
+        groups.setdefault(bucket_length(np.shape(u)[0]), []).append((u, y))
+    packed = []
+    for length in sorted(groups):
+        rows = groups[length]
+        U = np.stack([pad(np.asarray(u, float), length) for u, _ in rows])
+        Y = np.stack([pad(np.asarray(y, float), length) for _, y in rows])
+        M = np.stack([np.arange(length) < np.shape(u)[0] for u, _ in rows])
+        packed.append(tuple(jnp.asarray(a, dtype) for a in (U, Y, M)))
+    return tuple(packed)

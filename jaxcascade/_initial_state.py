@@ -32,8 +32,8 @@ score covers `[start, stop)`.
   the one-step prediction error (the innovations).
 
 Compilation is bounded: one program per model structure, record-length bucket
-(`bucket`: the length rounded up to 3 significant bits, the input padded with its last
-value) and `n`; the start is a traced index.
+(`_compile.bucket_length`: the length rounded up to 3 significant bits, the input
+padded with its last value) and `n`; the start is a traced index.
 """
 
 from __future__ import annotations
@@ -47,6 +47,7 @@ import numpy as np
 from jax.flatten_util import ravel_pytree
 from jaxtyping import Array, Float
 
+from ._compile import bucket_length, jit
 from ._effects._base import EffectState, ExtendedModel, recent
 from ._estimator._refine import least_squares
 from ._metrics import score
@@ -158,14 +159,6 @@ def innovations_from(model: ExtendedModel, residual, past):
     return out
 
 
-def bucket(length: int) -> int:
-    """`length` rounded up to 3 significant bits (at most 25% more): the padded length
-    of a record, so that records of similar lengths share one compiled program."""
-    length = int(length)
-    shift = max(length.bit_length() - 3, 0)
-    return -(-length // (1 << shift)) << shift
-
-
 def _free(state: ModelState):
     """The parts of `state` an initial-state fit chooses (module docstring)."""
     effects = tuple(None if s is None else s.free for s in state.effects)
@@ -226,7 +219,7 @@ class _Fit(eqx.Module):
     innovations_from_rest: Array
 
 
-@eqx.filter_jit
+@jit(static_argnames=("n", "grid", "max_steps"))
 def _initialise(model: ExtendedModel, u, y, first, n: int, grid: tuple, max_steps: int):
     """One compiled program per model structure, padded length, `n` and settings."""
     return _fit(model, u, y, first, n, grid, max_steps)
@@ -322,12 +315,18 @@ def initialise(
         )
     start = min(max(int(start), n), T)
     first = start - n
-    length = bucket(T)
+    length = bucket_length(T)
     pad = length - T
     u_padded = jnp.concatenate([u, jnp.full((pad,), u[-1], u.dtype)])
     y_padded = jnp.concatenate([y, jnp.full((pad,), y[-1], y.dtype)])
     fit = _initialise(
-        model, u_padded, y_padded, jnp.asarray(first, jnp.int32), int(n), tuple(grid), max_steps
+        model,
+        u_padded,
+        y_padded,
+        jnp.asarray(first, jnp.int32),
+        n=int(n),
+        grid=tuple(float(g) for g in grid),
+        max_steps=int(max_steps),
     )
     host = {k: np.asarray(getattr(fit, k))[:T] for k in ("y", "y_from_rest", "innovations")}
     return Initialised(

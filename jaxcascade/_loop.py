@@ -35,7 +35,9 @@ import jax
 import jax.flatten_util
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Array
 
+from ._compile import compile_count, pack, pad, release
 from ._diagnose import ResidualTests, regime_from_switches, residual_tests
 from ._effects import EFFECTS, Effect, ExtendedModel, Start, plain, simulate_with_switches
 from ._efficiency import standard_errors
@@ -45,12 +47,28 @@ from ._metrics import score
 from ._model import CascadeParams, Orders
 from ._noise import ARNoise
 from ._significance import BANDWIDTH_RULE, TEST_NAME, VARIANCE, Comparison, diebold_mariano
-from ._simulate import backlash_switches, shift
+from ._simulate import backlash_switches
 from ._validate import record
 
-# Compiled once per model structure and record length (the loop simulates the same
-# models on the same records many times).
-_simulate = eqx.filter_jit(simulate_with_switches)
+# Compiled once per model structure and record-length bucket (`_compile.bucket_length`:
+# the loop simulates the same models on the same records many times, and a record of a
+# new length would otherwise compile a new program).
+_simulate_jit = eqx.filter_jit(simulate_with_switches)
+_parallel_jit = eqx.filter_jit(lambda effect, u: effect.parallel(u))
+
+
+def _simulate(model: ExtendedModel, u):
+    """`simulate_with_switches` of one record (host side): the input padded to its
+    length's bucket, the outputs cut back, NumPy arrays."""
+    u = np.asarray(u)
+    out = _simulate_jit(model, jnp.asarray(pad(u)))
+    return tuple(np.asarray(a)[: u.shape[0]] for a in out)
+
+
+def _parallel(effect: Effect, u) -> np.ndarray:
+    """`effect.parallel(u)` of one record (host side, padded like `_simulate`)."""
+    u = np.asarray(u)
+    return np.asarray(_parallel_jit(effect, jnp.asarray(pad(u))))[: u.shape[0]]
 
 
 def _records(u, y):
@@ -60,16 +78,26 @@ def _records(u, y):
     return (u,), (y,)
 
 
+def _errors(model: ExtendedModel, groups) -> Array:
+    """The one-step prediction errors of `model` on packed records (`pack`; the
+    simulation errors for white noise), zero on the padding, one flat array."""
+
+    def one(u, y):
+        return model.noise.innovations(simulate_with_switches(model, u)[0] - y)
+
+    return jnp.concatenate([(jax.vmap(one)(U, Y) * M).reshape(-1) for U, Y, M in groups])
+
+
 @eqx.filter_jit
-def _refit(vectors, new: Effect, current: ExtendedModel, us, ys, orders: Orders, max_steps: int):
+def _refit(vectors, new: Effect, current: ExtendedModel, groups, orders: Orders, max_steps: int):
     """Output-error refit of the current model with `new` added, from a batch of starts
-    (`vmap` over `vectors` and the leading axis of `new`'s parameters), on the records
-    `us`, `ys` (tuples of arrays), each simulated from its own initial state. The cascade
+    (`vmap` over `vectors` and the leading axis of `new`'s parameters), on the packed
+    records `groups` (`pack`), each simulated from its own initial state. The cascade
     is refined in its admissible parameterisation (`_estimator._refine`), every effect's
     free parameters alongside; fixed ones (`Effect.fixed`) are held."""
-    u = us[0]
-    u_min = jnp.min(jnp.stack([jnp.min(v) for v in us]))
-    u_max = jnp.max(jnp.stack([jnp.max(v) for v in us]))
+    dtype = groups[0][0].dtype
+    u_min = jnp.min(jnp.stack([jnp.min(U) for U, _, _ in groups]))
+    u_max = jnp.max(jnp.stack([jnp.max(U) for U, _, _ in groups]))
     size = orders.size
 
     def one(vector, effect):
@@ -77,7 +105,7 @@ def _refit(vectors, new: Effect, current: ExtendedModel, us, ys, orders: Orders,
         free, fixed = eqx.partition(effects, tuple(e.free_filter() for e in effects))
         flat, unravel = jax.flatten_util.ravel_pytree(free)
         params = CascadeParams.from_vector(vector, orders, check=False)
-        z0 = jnp.concatenate([to_unconstrained(params, u_min, u_max), flat.astype(u.dtype)])
+        z0 = jnp.concatenate([to_unconstrained(params, u_min, u_max), flat.astype(dtype)])
 
         def unpack(z):
             params = from_unconstrained(z[:size], orders, u_min, u_max)
@@ -87,12 +115,7 @@ def _refit(vectors, new: Effect, current: ExtendedModel, us, ys, orders: Orders,
         def residual(z, args):
             # With a noise model the fit minimises the one-step prediction error (its
             # innovation; the simulation error itself for white noise).
-            model = unpack(z)
-            parts = [
-                model.noise.innovations(simulate_with_switches(model, v)[0] - w)
-                for v, w in zip(us, ys, strict=True)
-            ]
-            return jnp.concatenate(parts)
+            return _errors(unpack(z), groups)
 
         z, cost, status, _ = least_squares(residual, z0, None, max_steps=max_steps)
         return unpack(z), cost, status
@@ -105,12 +128,11 @@ def refit(model: ExtendedModel, start: Start, u, y, max_steps: int = 150):
     side). `u`, `y`: one record, or sequences of records fitted jointly. Returns
     `(model, cost, status)`."""
     us, ys = _records(u, y)
-    dtype = jnp.asarray(us[0]).dtype
-    us = tuple(jnp.asarray(v, dtype) for v in us)
-    ys = tuple(jnp.asarray(v, dtype) for v in ys)
+    groups = pack(us, ys)
+    dtype = groups[0][0].dtype
     effect = jax.tree_util.tree_map(lambda leaf: jnp.asarray(leaf, dtype), start.effect)
     models, costs, status = _refit(
-        jnp.asarray(start.vectors, dtype), effect, model, us, ys, start.orders, max_steps
+        jnp.asarray(start.vectors, dtype), effect, model, groups, start.orders, max_steps
     )
     costs = np.asarray(costs)
     best = int(np.argmin(np.where(np.isfinite(costs), costs, np.inf)))
@@ -127,28 +149,56 @@ def fit_parallel(model: ExtendedModel, effect_class, u, y, alternations: int = 1
     records. Returns `(model, cost, label)`, `cost` the mean squared error over the
     records."""
     us, ys = _records(u, y)
-    dtype = jnp.asarray(us[0]).dtype
-    us = tuple(jnp.asarray(v, dtype) for v in us)
-    ys = tuple(jnp.asarray(v, dtype) for v in ys)
+    us = tuple(np.asarray(v, float) for v in us)
+    ys = tuple(np.asarray(v, float) for v in ys)
     current = model
 
     def residuals(current):
-        return [
-            (np.asarray(v), np.asarray(w), np.asarray(w - _simulate(current, v)[0]))
-            for v, w in zip(us, ys, strict=True)
-        ]
+        return [(v, w, w - _simulate(current, v)[0]) for v, w in zip(us, ys, strict=True)]
 
     effect, label = effect_class.fit_records(current, residuals(current))
     for _ in range(alternations):
-        targets = tuple(w - effect.parallel(v) for v, w in zip(us, ys, strict=True))
+        targets = tuple(w - _parallel(effect, v) for v, w in zip(us, ys, strict=True))
         refitted, _, _ = refit(current, _no_effect(current.params), us, targets)
         current = ExtendedModel(refitted.params, refitted.effects[:-1], refitted.noise)
         effect, label = effect_class.fit_records(current, residuals(current))
     final = ExtendedModel(current.params, (*current.effects, effect), current.noise)
-    errors = np.concatenate(
-        [np.asarray(w - _simulate(final, v)[0]) for v, w in zip(us, ys, strict=True)]
-    )
+    errors = np.concatenate([w - _simulate(final, v)[0] for v, w in zip(us, ys, strict=True)])
     return final, float(np.mean(errors**2)), label
+
+
+@eqx.filter_jit
+def _standard_errors(model: ExtendedModel, groups):
+    """`_efficiency.standard_errors` of `model` on packed records (`pack`): the masked
+    simulation of every group, each record whitened apart."""
+    effects = model.effects
+    free, fixed = eqx.partition(effects, tuple(e.free_filter() for e in effects))
+    flat, unravel = jax.flatten_util.ravel_pytree(free)
+    size = model.orders.size
+    dtype = groups[0][0].dtype
+    theta = jnp.concatenate([model.params.to_vector().astype(dtype), flat.astype(dtype)])
+    lengths = [int(M.shape[1]) for _, _, M in groups]
+    rows = [int(M.shape[0]) for _, _, M in groups]
+
+    def simulate_theta(theta):
+        params = CascadeParams.from_vector(theta[:size], model.orders, check=False)
+        effects = tuple(eqx.combine(unravel(theta[size:]), fixed))
+        extended = ExtendedModel(params, effects, model.noise)
+        out = [
+            jax.vmap(lambda u: simulate_with_switches(extended, u)[0])(U) * M for U, _, M in groups
+        ]
+        return jnp.concatenate([o.reshape(-1) for o in out])
+
+    def whiten(residual):
+        parts, at = [], 0
+        for count, length in zip(rows, lengths, strict=True):
+            block = residual[at : at + count * length].reshape(count, length)
+            parts.append(jax.vmap(model.noise.innovations)(block).reshape(-1))
+            at += count * length
+        return jnp.concatenate(parts)
+
+    y = jnp.concatenate([(Y * M).reshape(-1) for _, Y, M in groups])
+    return standard_errors(simulate_theta, theta, y, whiten=whiten)[0]
 
 
 def model_standard_errors(model: ExtendedModel, u, y) -> dict[str, float]:
@@ -159,27 +209,14 @@ def model_standard_errors(model: ExtendedModel, u, y) -> dict[str, float]:
     with the noise model's whitening (`_efficiency.standard_errors`). A parameter the
     records do not determine has an infinite error."""
     us, ys = _records(u, y)
-    dtype = jnp.asarray(us[0]).dtype
-    us = tuple(jnp.asarray(v) for v in us)
-    y = jnp.concatenate([jnp.asarray(w, dtype) for w in ys])
-    cuts = np.cumsum([v.shape[0] for v in us])[:-1].tolist()
+    groups = pack(us, ys)
+    errors = np.asarray(_standard_errors(model, groups), float)
+    # `standard_errors` divides by N - P with N counting the padding (zeros in the
+    # residual and the Jacobian): rescale to the records' own samples.
+    padded = sum(int(M.size) for _, _, M in groups)
+    own = sum(int(np.shape(v)[0]) for v in us)
+    errors = errors * np.sqrt(max(padded - errors.size, 1) / max(own - errors.size, 1))
     effects = model.effects
-    free, fixed = eqx.partition(effects, tuple(e.free_filter() for e in effects))
-    flat, unravel = jax.flatten_util.ravel_pytree(free)
-    size = model.orders.size
-    theta = jnp.concatenate([model.params.to_vector().astype(dtype), flat.astype(dtype)])
-
-    def simulate_theta(theta):
-        params = CascadeParams.from_vector(theta[:size], model.orders, check=False)
-        effects = tuple(eqx.combine(unravel(theta[size:]), fixed))
-        extended = ExtendedModel(params, effects, model.noise)
-        return jnp.concatenate([simulate_with_switches(extended, v)[0] for v in us])
-
-    def whiten(residual):
-        parts = jnp.split(residual, cuts)
-        return jnp.concatenate([model.noise.innovations(part) for part in parts])
-
-    errors, _ = standard_errors(simulate_theta, theta, y, whiten=whiten)
     names = list(model.orders.names)
     for effect in effects:
         for field in dataclasses.fields(effect):
@@ -209,20 +246,28 @@ class Evaluation:
 def evaluate(
     model: ExtendedModel, u, y, sample_period: float = 1.0, window: tuple[int, int] | None = None
 ) -> Evaluation:
-    y_sim, x, y_cascade = (np.asarray(a) for a in _simulate(model, jnp.asarray(u)))
+    y_sim, x, y_cascade = _simulate(model, u)
     y = np.asarray(y)
     residual = y - y_sim
     p = model.params
-    g1, g2 = backlash_switches(
-        x, np.asarray(shift(jnp.asarray(y_cascade), 1)), float(p.cL), float(p.mR), float(p.cR)
-    )
+    previous = np.concatenate([np.zeros(1, y_cascade.dtype), y_cascade[:-1]])
+    g1, g2 = backlash_switches(x, previous, float(p.cL), float(p.mR), float(p.cR))
     regime = regime_from_switches(np.asarray(g1), np.asarray(g2))
-    innovations = np.asarray(model.noise.innovations(jnp.asarray(residual)))
+    innovations = innovations_np(model.noise, residual)
     error = score(y, y_sim)
     tests = residual_tests(u, innovations, regime, sample_period=sample_period)
     window_error = None if window is None else score(y[slice(*window)], y_sim[slice(*window)])
     prediction_error = score(y, y - innovations)
     return Evaluation(residual, y_sim, error, tests, window_error, innovations, prediction_error)
+
+
+def innovations_np(noise: ARNoise, residual) -> np.ndarray:
+    """`ARNoise.innovations` on the host (NumPy), for records of any length."""
+    residual = np.asarray(residual, float)
+    out = residual.copy()
+    for i, c in enumerate(np.asarray(noise.coefficients, float), start=1):
+        out[i:] -= c * residual[:-i]
+    return out
 
 
 def paired_improvement(current: np.ndarray, new: np.ndarray) -> float:
@@ -279,6 +324,8 @@ class LoopResult:
     # the final model's estimated standard errors on the estimation records
     # (`model_standard_errors`)
     standard_errors: dict[str, float] = dataclasses.field(default_factory=dict)
+    # programs XLA compiled during the loop (`_compile.compile_count`)
+    programs_compiled: int = 0
 
     def to_dict(self) -> dict:
         def params(model):
@@ -325,6 +372,7 @@ class LoopResult:
             "model_before": params(self.base),
             "model_after": params(self.final),
             "standard_errors_after": dict(self.standard_errors),
+            "programs_compiled": self.programs_compiled,
         }
 
 
@@ -367,6 +415,7 @@ def model_error_loop(
       (`Evaluation.window_error`).
     """
     say = progress or (lambda message: None)
+    compiled_before = compile_count()
     us, ys = _records(u_est, y_est)
     if len(us) != len(ys):
         raise ValueError(f"model_error_loop: {len(us)} input records but {len(ys)} outputs.")
@@ -401,7 +450,7 @@ def model_error_loop(
         failed = set(current.tests.failed)
         say(f"round {round_}: failed tests {sorted(failed)}; error {current.error:.4g}")
         records = [
-            (np.asarray(u), np.asarray(y), np.asarray(y - _simulate(model, u)[0]))
+            (np.asarray(u), np.asarray(y), np.asarray(y) - _simulate(model, u)[0])
             for u, y in zip(us, ys, strict=True)
         ]
         round_candidates = []
@@ -452,6 +501,9 @@ def model_error_loop(
         added.append(chosen.name)
         model, current = chosen.model, chosen.evaluation
         steps.append((f"+ {chosen.label}", model, current))
+        # The round's candidates compiled programs of their own structures: free them
+        # (each stays mapped in memory until released).
+        release()
     say("standard errors of the final model on the estimation records")
     errors = model_standard_errors(model, us, ys)
     return LoopResult(
@@ -465,6 +517,7 @@ def model_error_loop(
         t_threshold,
         min_gain,
         errors,
+        compile_count() - compiled_before,
     )
 
 

@@ -8,6 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from jaxcascade._compile import bucket_length as bucket
 from jaxcascade._effects import (
     EFFECTS,
     BacklashFriction,
@@ -28,7 +29,6 @@ from jaxcascade._effects import (
 )
 from jaxcascade._examples import example
 from jaxcascade._initial_state import (
-    bucket,
     initialise,
     innovations_from,
     rest_state,
@@ -189,11 +189,3 @@ def test_compilation_is_bounded_by_structure_and_bucket(monkeypatch):
     y = simulate_from(other, u, rest_state(other, u))[0]
     scored(other, u, y, 80, grid=(0.0, 1.0), max_steps=20)
     assert eqx.debug.get_num_traces(counted) == 1
-
-
-def test_bucket_rounds_up_to_three_significant_bits():
-    for T in range(1, 3000):
-        b = bucket(T)
-        assert T <= b < 1.25 * T + 1
-        assert b >> max(b.bit_length() - 3, 0) << max(b.bit_length() - 3, 0) == b
-    assert bucket(1000) == 1024

@@ -338,3 +338,44 @@ def test_ridge_with_vanishing_features_is_minimum_norm():
     theta = ridge([X], [2.0 * X[:, 0]])
     np.testing.assert_allclose(theta, [2.0, 0.0, 0.0], atol=1e-4)
     np.testing.assert_array_equal(ridge([np.zeros((10, 2))], [np.ones(10)]), [0.0, 0.0])
+
+
+def test_loop_compiles_a_bounded_set_of_programs():
+    # Issue 21: a loop over many estimation records compiles one program per model
+    # structure and record-length bucket, never one per record: the same count for 2
+    # and for 10 records of lengths in the same two buckets, under a fixed bound.
+    from jaxcascade._compile import compile_count, release
+
+    model = ExtendedModel(TRUTH(), (OutputOffset(jnp.asarray(0.8)),), ARNoise.white())
+
+    def record(seed, n):
+        return jaxcascade_record(model, seed, n)
+
+    u_val, y_val = record(99, 400)
+    counts = []
+    for lengths in ([150, 310], [150, 151, 152, 153, 154, 155, 300, 301, 305, 310]):
+        records = [record(seed, n) for seed, n in enumerate(lengths)]
+        base = TRUTH()
+        release()
+        before = compile_count()
+        result = model_error_loop(
+            [u for u, _ in records],
+            [y for _, y in records],
+            u_val,
+            y_val,
+            jc.Orders(),
+            base=base,
+            effects=("output_offset",),
+            max_effects=1,
+        )
+        assert result.added == ["output_offset"]
+        counts.append(compile_count() - before)
+        assert result.programs_compiled == counts[-1]
+    assert counts[0] == counts[1]
+    assert counts[1] <= 60
+
+
+def jaxcascade_record(model, seed, n):
+    from jaxcascade._testing import undeclared_record
+
+    return undeclared_record(model, jax.random.PRNGKey(seed), n, SNR, None)

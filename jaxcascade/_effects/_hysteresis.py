@@ -47,14 +47,17 @@ Levenberg-Marquardt from the best gap of a grid.
 
 from __future__ import annotations
 
+import functools
 import itertools
 from typing import ClassVar
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from .._compile import pack, pad
 from .._hysteresis import (
     backlash_friction,
     backlash_friction_from,
@@ -69,7 +72,16 @@ from .._hysteresis import (
     stop_operators,
     stop_operators_from,
 )
-from ._base import Effect, EffectState, Start, _batched, _repeat, recent
+from ._base import (
+    Effect,
+    EffectState,
+    ExtendedModel,
+    Start,
+    _batched,
+    _repeat,
+    recent,
+    simulate_extended,
+)
 
 _SIGNATURE = ("hysteresis",)
 
@@ -86,6 +98,13 @@ def _operator_after(state, positions, u, at) -> EffectState:
         [jnp.reshape(state.free, (1, -1)), jnp.reshape(positions, (len(u), -1))]
     )
     return EffectState(joined[at].reshape(state.free.shape), recent(state.known, u, at))
+
+
+def _stops(u, thresholds) -> np.ndarray:
+    """`stop_operators` of one record on the host, its length padded to a bucket (one
+    compiled program per bucket and threshold count, `_compile.pad`)."""
+    n = np.shape(u)[0]
+    return np.asarray(stop_operators(jnp.asarray(pad(u)), jnp.asarray(thresholds)))[:n]
 
 
 def _span(u) -> float:
@@ -208,7 +227,7 @@ class SlackFriction(_LinearPath):
             k, dead = structure
             key = (id(u), len(u))
             if key not in cache:
-                cache[key] = (u, np.asarray(stop_operators(jnp.asarray(u), radii)) / radii)
+                cache[key] = (u, _stops(u, radii) / radii)
             x = cache[key][1][:, k]
             up = np.clip((x - dead) / (1 - dead), 0, 1)
             down = np.clip((-x - dead) / (1 - dead), 0, 1)
@@ -295,39 +314,31 @@ class BacklashFriction(_LinearPath):
         """Output-error fit to the targets of `records` `[(u, target), ...]` jointly
         (each record's squared error weighted by 1/length): parameters
         `(gap, stiffness, upper, lower, offset)` and the weighted mean squared error."""
-        import jax
-
-        from .._estimator._refine import least_squares
-
-        us = tuple(jnp.asarray(np.asarray(r[0], float)) for r in records)
-        ys = tuple(jnp.asarray(np.asarray(r[1], float)) for r in records)
-        scales = tuple(1.0 / np.sqrt(len(y)) for y in ys)
-        span = _span(np.concatenate([np.asarray(u) for u in us]))
-        level = float(np.mean([np.quantile(np.abs(np.asarray(y)), 0.9) for y in ys])) or 1.0
-        n = cls.start_fractions
-
-        def residual(z, args):
-            g, k, up, lo = jnp.exp(z[:4])
-            return jnp.concatenate(
-                [
-                    c * (z[4] + backlash_friction(u, g, k, up, lo, n) - y)
-                    for u, y, c in zip(us, ys, scales, strict=True)
-                ]
-            )
-
-        solve = jax.jit(lambda z0: least_squares(residual, z0, None, max_steps=cls.max_steps))
+        us = [np.asarray(r[0], float) for r in records]
+        ys = [np.asarray(r[1], float) for r in records]
+        groups = pack(us, ys)
+        # each record's squared error weighted by 1/length
+        weights = tuple(
+            jnp.asarray(M, M.dtype) / jnp.sum(M, axis=1, keepdims=True) ** 0.5 for _, _, M in groups
+        )
+        span = _span(np.concatenate(us))
+        level = float(np.mean([np.quantile(np.abs(y), 0.9) for y in ys])) or 1.0
         best = None
         for gap, travel in itertools.product(cls.gap_fractions, cls.travel_fractions):
             start = [gap * span, level / (travel * span), level, level]
             z0 = jnp.asarray(np.log(start).tolist() + [0.0])
-            z, cost, *_ = solve(z0)
+            z, cost = _fit_backlash_friction(
+                z0, groups, weights, tuple(cls.start_fractions), cls.max_steps
+            )
             cost = float(cost)
             if np.isfinite(cost) and (best is None or cost < best[1]):
                 best = (np.asarray(z), cost)
         if best is None:
             raise ValueError("backlash_friction: no start gave a finite fit")
         z, cost = best
-        return np.concatenate([np.exp(z[:4]), z[4:]]), cost * len(np.concatenate(ys)) / len(ys)
+        # `least_squares`'s cost is the mean over the padded samples
+        padded = sum(int(M.size) for _, _, M in groups)
+        return np.concatenate([np.exp(z[:4]), z[4:]]), cost * padded / len(ys)
 
     @classmethod
     def fit_records(cls, model, records):
@@ -335,6 +346,29 @@ class BacklashFriction(_LinearPath):
         effect = cls(*(jnp.asarray(float(v)) for v in theta))
         g, k, up, lo, _ = theta
         return effect, f"{cls.name}:gap={g:.3g},k={k:.3g},levels={up:.3g}/{lo:.3g}"
+
+
+@functools.partial(jax.jit, static_argnames=("starts", "max_steps"))
+def _fit_backlash_friction(z0, groups, weights, starts, max_steps):
+    """Levenberg-Marquardt of `BacklashFriction.fit` from `z0` on packed records
+    (`_compile.pack`): one compiled program per record buckets, not per call."""
+    from .._estimator._refine import least_squares
+
+    def residual(z, args):
+        g, k, up, lo = jnp.exp(z[:4])
+
+        def one(u, y):
+            return z[4] + backlash_friction(u, g, k, up, lo, starts) - y
+
+        return jnp.concatenate(
+            [
+                (jax.vmap(one)(U, Y) * c).reshape(-1)
+                for (U, Y, _), c in zip(groups, weights, strict=True)
+            ]
+        )
+
+    z, cost, *_ = least_squares(residual, z0, None, max_steps=max_steps)
+    return z, cost
 
 
 class BacklashFrictionContacts(BacklashFriction):
@@ -406,7 +440,7 @@ class PrandtlIshlinskii(_LinearPath):
             # in NumPy from them).
             key = (id(u), len(u))
             if key not in cache:
-                cache[key] = (u, np.asarray(stop_operators(jnp.asarray(u), every)) / every)
+                cache[key] = (u, _stops(u, every) / every)
             x = cache[key][1][:, columns[size]]
             up = np.maximum(x[:, :, None] - knots, 0.0).reshape(len(x), -1)
             down = np.maximum(-x[:, :, None] - knots, 0.0).reshape(len(x), -1)
@@ -463,12 +497,23 @@ class DahlFriction(_LinearPath):
         span = _span(np.concatenate([np.asarray(r[0]) for r in records]))
 
         def features(fraction, u):
-            return np.asarray(dahl(jnp.asarray(u), 1.0 / (fraction * span), 1.0))[:, None]
+            n = np.shape(u)[0]
+            force = dahl(jnp.asarray(pad(u)), 1.0 / (fraction * span), 1.0)
+            return np.asarray(force)[:n, None]
 
         fraction, (level,), _ = cross_validate(list(cls.fractions), features, records)
         rate = 1.0 / (fraction * span)
         effect = cls(jnp.asarray(rate * abs(float(level))), jnp.asarray(float(level)))
         return effect, f"{cls.name}:travel={fraction:g}span"
+
+
+_simulate_extended = eqx.filter_jit(simulate_extended)
+
+
+def _simulate_padded(model, u) -> np.ndarray:
+    """`simulate_extended` of one record on the host, padded like `_stops`."""
+    n = np.shape(u)[0]
+    return np.asarray(_simulate_extended(model, jnp.asarray(pad(np.asarray(u)))))[:n]
 
 
 class InputBacklash(Effect):
@@ -502,9 +547,6 @@ class InputBacklash(Effect):
     def starts_records(cls, model, records):
         """One start: the gap of the grid whose model (the current cascade, not refitted)
         has the smallest squared error on the records."""
-        from ._base import ExtendedModel, simulate_extended
-
-        simulate = eqx.filter_jit(simulate_extended)
         span = _span(np.concatenate([np.asarray(r[0]) for r in records]))
         costs = []
         for fraction in cls.fractions:
@@ -512,7 +554,7 @@ class InputBacklash(Effect):
             extended = ExtendedModel(model.params, (*model.effects, effect), model.noise)
             costs.append(
                 sum(
-                    float(np.sum((np.asarray(y) - simulate(extended, jnp.asarray(u))) ** 2))
+                    float(np.sum((np.asarray(y) - _simulate_padded(extended, u)) ** 2))
                     for u, y, _ in records
                 )
             )
