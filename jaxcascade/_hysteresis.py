@@ -219,3 +219,77 @@ def simulate_lugre(params: dict[str, float], u, dt: float):
     """Force of a fitted LuGre model (`fit_lugre`) for the displacement `u`."""
     u = jnp.asarray(u)
     return lugre(u, dt, *(params[name] for name in _LUGRE)) + params["offset"]
+
+
+# State-carrying forms (`_initial_state`): the same recursions continued from a given
+# state instead of from rest. `position` is the operator's state after the sample before
+# `u(0)`, and `u_prev` that sample's input: the first increment is `u(0) - u_prev`
+# (from rest: position 0 or the start fractions, `u_prev = u(0)`, as above). Each
+# returns the trajectory of its state, from which a caller reads the state at any sample.
+
+
+def stop_operators_from(u, thresholds, position, u_prev):
+    """`stop_operators` from the positions `position` (`Float[Array, " K"]`) after the
+    input `u_prev`. **Returns:** the positions, `Float[Array, "T K"]`."""
+    thresholds = jnp.asarray(thresholds, u.dtype)
+    du = jnp.diff(u, prepend=jnp.reshape(jnp.asarray(u_prev, u.dtype), (1,)))
+
+    def step(s, d):
+        s = jnp.clip(s + d, -thresholds, thresholds)
+        return s, s
+
+    _, out = jax.lax.scan(step, jnp.asarray(position, u.dtype), du)
+    return out
+
+
+def pi_basis_from(u, thresholds, knots, position, u_prev):
+    """`pi_basis` from the stop operators' positions `position` after `u_prev`.
+    **Returns:** `(basis, positions)`."""
+    thresholds = jnp.asarray(thresholds, u.dtype)
+    positions = stop_operators_from(u, thresholds, position, u_prev)
+    s = positions / thresholds
+    knots = jnp.asarray(knots, u.dtype)
+    up = jnp.maximum(s[:, :, None] - knots, 0.0)
+    down = jnp.maximum(-s[:, :, None] - knots, 0.0)
+    basis = jnp.concatenate([s, up.reshape(s.shape[0], -1), down.reshape(s.shape[0], -1)], 1)
+    return basis, positions
+
+
+def backlash_friction_limits(gap, stiffness, upper, lower):
+    """The stop operator's limits `(-(gap + lower/stiffness), gap + upper/stiffness)` of
+    `backlash_friction`: the admissible relative positions."""
+    return -(gap + lower / stiffness), gap + upper / stiffness
+
+
+def backlash_friction_from(u, gap, stiffness, upper, lower, position, u_prev):
+    """`backlash_friction` from the relative positions `position` (one per averaged
+    start, `Float[Array, " K"]`) after the input `u_prev`.
+
+    **Returns:** `(force, positions)`, `Float[Array, " T"]` and `Float[Array, "T K"]`.
+    """
+    dtype = u.dtype
+    gap, stiffness, upper, lower = (jnp.asarray(v, dtype) for v in (gap, stiffness, upper, lower))
+    lo, hi = backlash_friction_limits(gap, stiffness, upper, lower)
+    du = jnp.diff(u, prepend=jnp.reshape(jnp.asarray(u_prev, dtype), (1,)))
+
+    def step(s, d):
+        s = jnp.clip(s + d, lo, hi)
+        force = stiffness * (jnp.maximum(s - gap, 0.0) + jnp.minimum(s + gap, 0.0))
+        return s, (jnp.mean(force), s)
+
+    _, (force, positions) = jax.lax.scan(step, jnp.asarray(position, dtype), du)
+    return force, positions
+
+
+def dahl_from(u, sigma, level, force, u_prev):
+    """`dahl` from the force `force` (a scalar) after the input `u_prev`.
+    **Returns:** the force, `Float[Array, " T"]` (the operator's state)."""
+    du = jnp.diff(u, prepend=jnp.reshape(jnp.asarray(u_prev, u.dtype), (1,)))
+
+    def step(f, d):
+        f = f + sigma * d * (1 - f / level * jnp.sign(d))
+        f = jnp.clip(f, -level, level)
+        return f, f
+
+    _, out = jax.lax.scan(step, jnp.asarray(force, u.dtype), du)
+    return out

@@ -26,6 +26,7 @@ LAYERS = [
         "_noise",
         "_loop",
         "_testing",
+        "_initial_state",
     },
     {"_montecarlo"},
     {"_plot", "_benchmark"},

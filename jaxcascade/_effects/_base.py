@@ -64,6 +64,30 @@ class Effect(eqx.Module):
         from the model's input `u`; `None` (the default) for an effect without one."""
         return None
 
+    # The effect's state (`_initial_state`): the state before a record's first sample
+    # (`rest_state`, from the record's input `u`: `None` for an effect without state),
+    # and the `*_with_state` forms of `input`, `output` and `parallel`, which continue
+    # from `state` and also return the state before sample `at` (`at` <= T, traced: the
+    # state at the end of a record, or before a later sample of a padded one). The
+    # defaults pass the state through unchanged.
+
+    def rest_state(self, u) -> EffectState | None:
+        return None
+
+    def input_with_state(self, u, state, at):
+        return self.input(u), state
+
+    def output_with_state(self, y, x, state, at):
+        return self.output(y, x), state
+
+    def parallel_with_state(self, u, state, at):
+        return self.parallel(u), state
+
+    def state_range(self, state) -> tuple[Array, Array] | None:
+        """Bounds `(low, high)` of `state.free` (an operator's admissible positions), for
+        the starts of an initial-state fit; `None` where it has no free state."""
+        return None
+
     def free_filter(self):
         """`eqx.partition` filter: True for the parameters refined with the cascade."""
         everything = jax.tree_util.tree_map(lambda _: True, self)
@@ -93,6 +117,23 @@ class Effect(eqx.Module):
         `starts` on the records joined end to end."""
         u, y, residual = (np.concatenate([np.asarray(r[i]) for r in records]) for i in range(3))
         return cls.starts(model, u, y, residual)
+
+
+class EffectState(eqx.Module):
+    """One effect's state before a sample: `free`, what the record's input does not
+    determine (operator positions, a friction force: fitted by an initial-state fit),
+    and `known`, what it does (past inputs, the sample's index: taken from the record)."""
+
+    free: Float[Array, " F"]
+    known: Float[Array, ...]
+
+
+def recent(past, signal, at):
+    """The `len(past)` values of `signal` before sample `at`, newest first, continuing
+    into `past` (the values before `signal(0)`, newest first) where `at` is small."""
+    count = past.shape[0]
+    joined = jnp.concatenate([past[::-1].astype(signal.dtype), signal])
+    return jax.lax.dynamic_slice(joined, (at,), (count,))[::-1]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -233,6 +274,14 @@ class OutputDrift(Effect):
     def output(self, y, x):
         return y + self.slope * jnp.arange(y.shape[0], dtype=y.dtype) / 1000.0
 
+    def rest_state(self, u):
+        # the index of the record's first sample
+        return EffectState(jnp.zeros((0,), u.dtype), jnp.zeros((), u.dtype))
+
+    def output_with_state(self, y, x, state, at):
+        t = state.known + jnp.arange(y.shape[0], dtype=y.dtype)
+        return y + self.slope * t / 1000.0, EffectState(state.free, state.known + at)
+
     @classmethod
     def starts(cls, model, u, y, residual):
         t = np.arange(len(residual)) / 1000.0
@@ -293,6 +342,17 @@ class InputDelay(Effect):
     def input(self, u):
         index = jnp.arange(u.shape[0]) - self.delay.astype(jnp.int32)
         return jnp.where(index >= 0, u[jnp.clip(index, 0, None)], 0.0)
+
+    def rest_state(self, u):
+        # the past inputs u(-1), ..., u(-max_delay): zero before the record
+        return EffectState(jnp.zeros((0,), u.dtype), jnp.zeros((self.max_delay,), u.dtype))
+
+    def input_with_state(self, u, state, at):
+        count = state.known.shape[0]
+        joined = jnp.concatenate([state.known[::-1], u])
+        index = jnp.arange(u.shape[0]) + count - self.delay.astype(jnp.int32)
+        delayed = jnp.where(index >= 0, joined[jnp.clip(index, 0, None)], 0.0)
+        return delayed, EffectState(state.free, recent(state.known, u, at))
 
     @classmethod
     def starts(cls, model, u, y, residual):

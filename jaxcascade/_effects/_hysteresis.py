@@ -60,16 +60,44 @@ from jaxtyping import Array, Float
 from .._compile import pack, pad
 from .._hysteresis import (
     backlash_friction,
+    backlash_friction_from,
+    backlash_friction_limits,
     dahl,
+    dahl_from,
     pi_basis,
+    pi_basis_from,
     ridge,
     slack_map,
     stop_operator,
     stop_operators,
+    stop_operators_from,
 )
-from ._base import Effect, ExtendedModel, Start, _batched, _repeat, simulate_extended
+from ._base import (
+    Effect,
+    EffectState,
+    ExtendedModel,
+    Start,
+    _batched,
+    _repeat,
+    recent,
+    simulate_extended,
+)
 
 _SIGNATURE = ("hysteresis",)
+
+
+def _operator_state(position, u) -> EffectState:
+    """An operator's state before the record `u`: its positions, and the input before
+    the first sample taken equal to it (no first increment), as the operators do."""
+    return EffectState(jnp.asarray(position, u.dtype), u[:1])
+
+
+def _operator_after(state, positions, u, at) -> EffectState:
+    """The operator's state before sample `at`, from its trajectory `positions`."""
+    joined = jnp.concatenate(
+        [jnp.reshape(state.free, (1, -1)), jnp.reshape(positions, (len(u), -1))]
+    )
+    return EffectState(joined[at].reshape(state.free.shape), recent(state.known, u, at))
 
 
 def _stops(u, thresholds) -> np.ndarray:
@@ -175,6 +203,20 @@ class SlackFriction(_LinearPath):
         dead = jnp.clip(self.dead, 0.0, 0.98)
         return slack_map(s, r, dead, self.upper, self.lower)
 
+    def rest_state(self, u):
+        return _operator_state(jnp.zeros((1,)), u)
+
+    def parallel_with_state(self, u, state, at):
+        r = jnp.abs(self.threshold) + 1e-6
+        s = stop_operators_from(u, jnp.reshape(r, (1,)), state.free, state.known[0])
+        dead = jnp.clip(self.dead, 0.0, 0.98)
+        force = slack_map(s[:, 0], r, dead, self.upper, self.lower)
+        return force, _operator_after(state, s, u, at)
+
+    def state_range(self, state):
+        r = jnp.abs(self.threshold) + 1e-6
+        return -r * jnp.ones_like(state.free), r * jnp.ones_like(state.free)
+
     @classmethod
     def fit_records(cls, model, records):
         span = _span(np.concatenate([np.asarray(r[0]) for r in records]))
@@ -239,6 +281,33 @@ class BacklashFriction(_LinearPath):
             jnp.abs(self.lower),
             self.start_fractions,
         )
+
+    def _magnitudes(self):
+        tiny = 1e-9
+        return (
+            jnp.abs(self.gap),
+            jnp.abs(self.stiffness) + tiny,
+            jnp.abs(self.upper),
+            jnp.abs(self.lower),
+        )
+
+    def rest_state(self, u):
+        # the rotor's relative position for each averaged start (`backlash_friction`)
+        gap, stiffness, upper, lower = (jnp.asarray(v, u.dtype) for v in self._magnitudes())
+        low, high = backlash_friction_limits(gap, stiffness, upper, lower)
+        fractions = jnp.asarray(self.start_fractions, u.dtype)
+        return _operator_state(jnp.clip(gap * fractions, low, high), u)
+
+    def parallel_with_state(self, u, state, at):
+        force, positions = backlash_friction_from(
+            u, *self._magnitudes(), state.free, state.known[0]
+        )
+        return self.offset + force, _operator_after(state, positions, u, at)
+
+    def state_range(self, state):
+        low, high = backlash_friction_limits(*self._magnitudes())
+        ones = jnp.ones_like(state.free)
+        return low * ones, high * ones
 
     @classmethod
     def fit(cls, records) -> tuple[np.ndarray, float]:
@@ -330,6 +399,17 @@ class PrandtlIshlinskii(_LinearPath):
     def parallel(self, u):
         return pi_basis(u, self.thresholds, self.knots) @ self.weights + self.offset
 
+    def rest_state(self, u):
+        return _operator_state(jnp.zeros(self.thresholds.shape), u)
+
+    def parallel_with_state(self, u, state, at):
+        basis, positions = pi_basis_from(u, self.thresholds, self.knots, state.free, state.known[0])
+        return basis @ self.weights + self.offset, _operator_after(state, positions, u, at)
+
+    def state_range(self, state):
+        r = jnp.asarray(self.thresholds, state.free.dtype)
+        return -r, r
+
     @classmethod
     def grid(cls, span: float, size: int) -> np.ndarray:
         """Thresholds from 1% to 50% of the input span, geometrically spaced."""
@@ -399,6 +479,19 @@ class DahlFriction(_LinearPath):
         level = jnp.abs(self.level) + 1e-6
         return jnp.sign(self.level) * dahl(u, jnp.abs(self.sigma), level)
 
+    def rest_state(self, u):
+        # the unit-sign force of `dahl`, before the sign of the level
+        return _operator_state(jnp.zeros((1,)), u)
+
+    def parallel_with_state(self, u, state, at):
+        level = jnp.abs(self.level) + 1e-6
+        force = dahl_from(u, jnp.abs(self.sigma), level, state.free[0], state.known[0])
+        return jnp.sign(self.level) * force, _operator_after(state, force, u, at)
+
+    def state_range(self, state):
+        level = jnp.abs(self.level) + 1e-6
+        return -level * jnp.ones_like(state.free), level * jnp.ones_like(state.free)
+
     @classmethod
     def fit_records(cls, model, records):
         span = _span(np.concatenate([np.asarray(r[0]) for r in records]))
@@ -437,6 +530,18 @@ class InputBacklash(Effect):
 
     def input(self, u):
         return u - stop_operator(u, jnp.abs(self.gap))
+
+    def rest_state(self, u):
+        return _operator_state(jnp.zeros((1,)), u)
+
+    def input_with_state(self, u, state, at):
+        gap = jnp.reshape(jnp.abs(self.gap), (1,))
+        s = stop_operators_from(u, gap, state.free, state.known[0])
+        return u - s[:, 0], _operator_after(state, s, u, at)
+
+    def state_range(self, state):
+        gap = jnp.abs(self.gap)
+        return -gap * jnp.ones_like(state.free), gap * jnp.ones_like(state.free)
 
     @classmethod
     def starts_records(cls, model, records):
