@@ -133,9 +133,13 @@ def simulate_from(model: ExtendedModel, u, state: ModelState, at=None):
     for i, effect in enumerate(model.effects):
         u, states[i] = effect.input_with_state(u, states[i], at)
     c = state.cascade
-    v = pwl(model.params, u)
-    x = linear_block_from(model.params, v, c.v_past, c.x_past)
-    y_cascade = backlash_from(model.params, x, c.y_prev)
+    if model.cascade:
+        v = pwl(model.params, u)
+        x = linear_block_from(model.params, v, c.v_past, c.x_past)
+        y_cascade = backlash_from(model.params, x, c.y_prev)
+    else:  # an effect replaced the cascade (`ExtendedModel.cascade`): its state stays put
+        v, x = jnp.zeros_like(u), u
+        y_cascade = jnp.zeros_like(u) + 0 * c.y_prev
     y = y_cascade
     for i, effect in enumerate(model.effects):
         y, states[i] = effect.output_with_state(y, x, states[i], at)

@@ -53,6 +53,7 @@ from ._effects import (
 from ._efficiency import standard_errors
 from ._estimator._refine import from_unconstrained, least_squares, to_unconstrained
 from ._estimator._robust import Robust
+from ._initial_state import initialise
 from ._metrics import score
 from ._model import CascadeParams, Orders
 from ._noise import ARNoise
@@ -78,6 +79,17 @@ def _simulate(model: ExtendedModel, u):
 def simulated_output(model: ExtendedModel, u) -> np.ndarray:
     """The model's output simulated from rest on one record (NumPy)."""
     return _simulate(model, u)[0]
+
+
+def initialised_output(model: ExtendedModel, u, y, start: int, n: int) -> np.ndarray:
+    """The model's output on `[start, T)` of one record, its state before `start - n`
+    fitted to the measured output `y` on `[start - n, start)` (`_initial_state.initialise`,
+    the nonlinear benchmarks' convention); from rest where `n` is 0 or too short for
+    the noise model's past."""
+    n = min(int(n), int(start))
+    if n < max(1, model.noise.order):
+        return simulated_output(model, u)[start:]
+    return initialise(model, np.asarray(u, float), np.asarray(y, float), start, n).y[start:]
 
 
 def _parallel(effect: Effect, u) -> np.ndarray:

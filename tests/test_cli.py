@@ -176,7 +176,7 @@ def test_loop_on_several_records_with_a_window(capsys, tmp_path):
     import jaxcascade as jc
 
     paths = []
-    for seed in (1, 2, 3):
+    for seed in (1, 2, 3, 4):
         u = jc.uniform_input(jax.random.PRNGKey(seed), 600)
         y = jc.simulate(jc.example(1).params(), u)
         y = y + 0.05 * jax.random.normal(jax.random.PRNGKey(10 + seed), y.shape)
@@ -185,10 +185,20 @@ def test_loop_on_several_records_with_a_window(capsys, tmp_path):
         paths.append(str(path))
     argv = ["loop", paths[0], paths[1], "--validate", paths[2], "--input", "u", "--output", "y"]
     argv += ["--window", "100:400", "--max-effects", "0", "--json", "--quiet"]
+    argv += ["--test", paths[3], "--test-window", "200:500"]
     argv += ["--report", str(tmp_path / "report")]
     assert main(argv) == 0
     result = json.loads(capsys.readouterr().out)
     assert 0 < result["window_error_before"] == result["window_error_after"] < 0.5
+    # issue 21: initialised and from-rest figures side by side, the test record apart
+    assert result["init_samples"] == 50
+    assert 0 < result["window_error_after_from_rest"] < 0.5
+    (test,) = result["test"]
+    assert test["record"] == "r4.csv" and 0 < test["window_error"] < 0.5
+    assert 0 < test["error_from_rest"] < 0.5 and 0 < test["window_error_from_rest"] < 0.5
+    # a correct cascade beats the mean and the ARX peer: nothing to warn about
+    assert result["verdict"] == []
+    assert result["structure_after"] == "u -> pwl(2,2) -> linear(2,2) -> backlash -> y"
     full = json.loads((tmp_path / "report" / "report.json").read_text())
     assert len(full["records"]["estimation"]) == 2
     assert full["window"]["model_samples"] == [100, 400]
@@ -196,10 +206,32 @@ def test_loop_on_several_records_with_a_window(capsys, tmp_path):
     errors = result["standard_errors_after"]
     assert errors == full["standard_errors_after"]
     assert set(errors) == set(jc.Orders().names) and all(e > 0 for e in errors.values())
+    report = (tmp_path / "report" / "report.md").read_text()
+    assert "better than the mean of the output" in report and "r4.csv | test" in report
+    # A test window per test record, or a clear error.
+    bad = argv + ["--test-window", "1:2", "3:4"]
+    assert main(bad) == 2
+    assert "--test-window" in capsys.readouterr().err
     # A window outside the validation record is one line, exit 2.
     argv[argv.index("100:400")] = "100:4000"
     assert main(argv) == 2
     assert "--window" in capsys.readouterr().err
+
+
+def test_verdict_says_when_the_final_model_is_worse_than_a_trivial_one():
+    from jaxcascade._scoring import RecordScore, verdict
+
+    def row(model, record, window_error):
+        return RecordScore(model, record, "validation", 0.5, window_error, 0.6, 0.7, 50)
+
+    final = [row("final model", "a.csv", 1.2), row("final model", "b.csv", 0.3)]
+    arx = [row("linear ARX", "a.csv", 0.9), row("linear ARX", "b.csv", 0.4)]
+    (sentence,) = verdict(final, arx)
+    assert "a.csv" in sentence and "mean of the output" in sentence and "ARX" in sentence
+    assert "try" in sentence
+    assert verdict([row("final model", "b.csv", 0.3)], arx) == []
+    worse_than_arx = verdict([row("final model", "b.csv", 0.5)], arx)
+    assert len(worse_than_arx) == 1 and "mean" not in worse_than_arx[0]
 
 
 def test_loop_effects_option_names_the_library(capsys, tmp_path):

@@ -27,6 +27,7 @@ LAYERS = [
         "_loop",
         "_testing",
         "_initial_state",
+        "_scoring",
     },
     {"_montecarlo"},
     {"_plot", "_benchmark"},

@@ -250,7 +250,7 @@ def run_loop(args) -> int:
     scored = [("validation", validation, window)]
     scored += [("test", r, w) for r, w in zip(tests, test_windows, strict=True)]
     scores = [
-        score_record(name, record.name, role, record.u, record.y, *pair, w, args.init_samples)
+        score_record(name, _name(record), role, record.u, record.y, *pair, w, args.init_samples)
         for role, record, w in scored
         for name, pair in models.items()
     ]
@@ -322,7 +322,7 @@ def run_loop(args) -> int:
             result.after.simulated if result.added else None,
             folder / "compare.png",
             arx=arx.simulate(validation.u),
-            title=f"validation record {validation.name}: measured vs free-run simulation",
+            title=f"validation record {_name(validation)}: measured vs free-run simulation",
             units=_units(args.output, args.scaling),
             init=(time[init_from], time[scored_from]) if scored_from > init_from else None,
             scored=(time[scored_from], time[(window[1] if window else len(time)) - 1]),
@@ -337,6 +337,10 @@ def run_loop(args) -> int:
     for sentence in warnings:
         print(sentence, file=sys.stderr if args.json else sys.stdout)
     return 0
+
+
+def _name(record) -> str:
+    return pathlib.Path(record.source).name if record.source else "arrays"
 
 
 def _units(column: str, scaling: str) -> str:
