@@ -1,25 +1,42 @@
-"""Issue 15: the model-error loop on the measured friction-damper (BRFD) records.
+"""Issue 21: the model-error loop on the measured friction-damper (BRFD) records.
 
-    python benchmarks/brfd.py [--data ../shared/data/brfd] [--out results/brfd] [--decimate 16]
+    python benchmarks/brfd.py [--data ../shared/data/brfd] [--out results/brfd]
+        [--decimate 16] [--init-samples 50] [--only NAME] [--stability] [--all-records]
 
-Runs, each with `jaxcascade loop` (its report in OUT/<run>/):
-- the 30 lb harmonic tests plus the Imperial Valley DBE -> Kocaeli DBE, and the other way;
-- the 30 lb harmonic tests only -> each earthquake.
-Every validation record is also scored on its strong-motion window (samples of the
-1024 Hz file; README of the data). Beside the loop's models (the declared cascade and
-each effect it added, in order): the linear ARX peer and a LuGre model of our own
-(`_hysteresis.fit_lugre`, fitted on the same estimation records, from the displacement
-alone), and the published figures (Coble et al. 2024, which use the measured force).
-Writes OUT/table.csv and OUT/table.md. No figure is typed in: every number is measured
-here except the published column.
+Each run is `jaxcascade loop` in a fresh process (its report in OUT/<run>/), timed, its
+peak resident memory (`wait4`), its largest count of memory mappings (sampled every
+0.5 s from /proc) and the programs it compiled recorded:
+
+- `harmonics+A_to_B`: estimated on the 30 lb harmonic tests plus earthquake A,
+  validated (and the loop's candidates chosen) on earthquake B's strong-motion window;
+  both ways;
+- `harmonics_to_B_test_A`: the three-way split: estimated on the 30 lb harmonic tests,
+  validated on B, tested on A (the only out-of-sample figure); both ways;
+- `--all-records`: the 20 harmonic tests (both band tensions) and Kocaeli as estimation
+  records at decimation 8, validated on Imperial Valley: that it runs to the end, and at
+  what cost (OUT/resources.md);
+- `--stability`: the first kind of run with the robust fit's `retries` 0 and 2 and
+  seeds 0, 1, 2 (OUT/stability.md): which effect and structure the loop chooses, and
+  the window NRMSE's spread.
+
+Every scored figure is initialised as the nonlinear benchmarks do (the model's state set
+from the measured force on the `--init-samples` samples before the window, never its
+parameters) with the from-rest figure beside it. Peers: the linear ARX model (same
+convention), a LuGre model of our own (`_hysteresis.fit_lugre` on the same estimation
+records, from the displacement alone, from rest), and the published figures (Coble et al.
+2024, which use the measured force at every sample). No figure is typed in but the
+published ones.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import pathlib
+import subprocess
 import sys
+import threading
 import time
 
 WINDOWS = {"imperialvalley": (3072, 7680), "kocaeli": (6144, 14336)}
@@ -27,31 +44,88 @@ FILES = {
     "imperialvalley": "earthquake_imperialvalley_dbe.csv",
     "kocaeli": "earthquake_kocaeli_dbe.csv",
 }
+OTHER = {"imperialvalley": "kocaeli", "kocaeli": "imperialvalley"}
 # Coble, Cao, Downey, Ricles (2024), MSSP 111522, window RRSE (= our window NRMSE).
 PUBLISHED = {
     "imperialvalley": {"LuGre": 0.44, "LuGre, learned stiffness": 0.33},
     "kocaeli": {"LuGre": 0.79, "LuGre, learned stiffness": 0.44},
 }
+HYSTERESIS = "backlash_friction,backlash_friction_contacts,slack_friction,prandtl_ishlinskii"
+HYSTERESIS += ",dahl_friction"
 
 
-def harmonic_files(data: pathlib.Path) -> list[pathlib.Path]:
+def harmonic_files(data: pathlib.Path, tension: int | None = 30) -> list[pathlib.Path]:
     import pandas as pd
 
     index = pd.read_csv(data / "characterization" / "index.csv")
-    chosen = index[index.band_tension_lb == 30].file
+    chosen = index.file if tension is None else index[index.band_tension_lb == tension].file
     return [data / "characterization" / name for name in chosen]
 
 
-def runs(data: pathlib.Path):
+def runs(data: pathlib.Path, args):
+    """`(name, estimation files, validation, tests, decimate, extra argv)` of each run."""
     harmonics = harmonic_files(data)
+    base = []
     for train, valid in (("imperialvalley", "kocaeli"), ("kocaeli", "imperialvalley")):
-        yield f"harmonics+{train}_to_{valid}", harmonics + [data / FILES[train]], valid
+        base.append((f"harmonics+{train}_to_{valid}", harmonics + [data / FILES[train]], valid, []))
     for valid in ("imperialvalley", "kocaeli"):
-        yield f"harmonics_to_{valid}", harmonics, valid
+        test = OTHER[valid]
+        base.append((f"harmonics_to_{valid}_test_{test}", harmonics, valid, [test]))
+    for name, train, valid, tests in base:
+        yield name, train, valid, tests, args.decimate, []
+    if args.stability:
+        for name, train, valid, tests in base[:2]:
+            for retries in (0, 2):
+                for seed in (0, 1, 2):
+                    extra = ["--retries", str(retries), "--seed", str(seed)]
+                    label = f"stability/{name}_retries{retries}_seed{seed}"
+                    yield label, train, valid, tests, args.decimate, extra
+    if args.all_records:
+        every = harmonic_files(data, None) + [data / FILES["kocaeli"]]
+        yield "all21+kocaeli_to_imperialvalley", every, "imperialvalley", [], 8, []
 
 
-def lugre_row(train, valid_path, window, decimate, run, valid):
+def run_loop(argv: list[str]) -> dict:
+    """`jaxcascade loop ARGV` in a fresh process: its wall time, peak resident memory
+    (`wait4`) and largest count of memory mappings (sampled)."""
+    started = time.perf_counter()
+    process = subprocess.Popen(
+        [sys.executable, "-m", "jaxcascade", *argv],
+        stdout=subprocess.PIPE,
+        stderr=sys.stderr,
+        text=True,
+    )
+    largest = [0]
+
+    def sample():
+        while process.poll() is None:
+            try:
+                with open(f"/proc/{process.pid}/maps") as maps:
+                    largest[0] = max(largest[0], sum(1 for _ in maps))
+            except OSError:
+                return
+            time.sleep(0.5)
+
+    sampler = threading.Thread(target=sample, daemon=True)
+    sampler.start()
+    out = process.stdout.read()
+    _, status, usage = os.wait4(process.pid, 0)
+    process.returncode = os.waitstatus_to_exitcode(status)
+    sampler.join(timeout=2)
+    return {
+        "returncode": process.returncode,
+        "stdout": out,
+        "seconds": time.perf_counter() - started,
+        "peak_rss_mb": usage.ru_maxrss / 1024,
+        "max_mappings": largest[0],
+    }
+
+
+def lugre_rows(train, data, scored, decimate, run):
+    import jax
     import numpy as np
+
+    jax.config.update("jax_enable_x64", True)
 
     from jaxcascade._data import read_record
     from jaxcascade._hysteresis import fit_lugre, simulate_lugre
@@ -59,20 +133,27 @@ def lugre_row(train, valid_path, window, decimate, run, valid):
 
     options = dict(time_column="time_s", decimate=decimate, scaling="none")
     records = [read_record(p, "displacement_in", "force_kip", **options) for p in train]
-    validation = read_record(valid_path, "displacement_in", "force_kip", **options)
-    dt = validation.sample_period
-    params = fit_lugre([(r.u, r.y) for r in records], dt)
-    y = np.asarray(simulate_lugre(params, validation.u, dt))
-    a, b = window[0] // decimate, -(-window[1] // decimate)
-    return {
-        "run": run,
-        "validation": valid,
-        "model": "LuGre (ours, displacement only)",
-        "nrmse": score(validation.y, y),
-        "window_nrmse": score(validation.y[a:b], y[a:b]),
-        "effects": "",
-        "lugre": params,
-    }
+    rows = []
+    params = None
+    for role, name in scored:
+        record = read_record(data / FILES[name], "displacement_in", "force_kip", **options)
+        if params is None:
+            params = fit_lugre([(r.u, r.y) for r in records], record.sample_period)
+        y = np.asarray(simulate_lugre(params, record.u, record.sample_period))
+        a, b = WINDOWS[name][0] // decimate, -(-WINDOWS[name][1] // decimate)
+        rows.append(
+            {
+                "run": run,
+                "record": name,
+                "role": role,
+                "model": "LuGre (ours, displacement only)",
+                "window_nrmse": None,
+                "window_nrmse_from_rest": score(record.y[a:b], y[a:b]),
+                "nrmse": None,
+                "nrmse_from_rest": score(record.y, y),
+            }
+        )
+    return rows
 
 
 def main(argv=None) -> int:
@@ -80,8 +161,11 @@ def main(argv=None) -> int:
     parser.add_argument("--data", default="../shared/data/brfd")
     parser.add_argument("--out", default="results/brfd")
     parser.add_argument("--decimate", type=int, default=16)
+    parser.add_argument("--init-samples", type=int, default=50)
     parser.add_argument("--max-effects", type=int, default=2)
     parser.add_argument("--only", default=None, help="run only the runs whose name holds this")
+    parser.add_argument("--stability", action="store_true", help="retries 0/2 x seeds 0-2")
+    parser.add_argument("--all-records", action="store_true", help="the 21-record run")
     parser.add_argument(
         "--effects",
         default=None,
@@ -89,122 +173,172 @@ def main(argv=None) -> int:
     )
     args = parser.parse_args(argv)
 
-    import jax
-
-    jax.config.update("jax_enable_x64", True)
-    import pandas as pd
-
-    from jaxcascade._cli import main as cli
-    from jaxcascade._metrics import fit_percent
 
     data, out = pathlib.Path(args.data), pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    rows = []
-    times = {}
-    for run, train, valid in runs(data):
+    command = "python benchmarks/brfd.py " + " ".join(sys.argv[1:] if argv is None else argv)
+    rows, resources, choices = [], [], []
+    for run, train, valid, tests, decimate, extra in runs(data, args):
         if args.only and args.only not in run:
             continue
-        started = time.perf_counter()
-        window = WINDOWS[valid]
         report = out / run
-        argv = ["loop", *map(str, train), "--validate", str(data / FILES[valid])]
-        argv += ["--input", "displacement_in", "--output", "force_kip", "--time", "time_s"]
-        argv += ["--decimate", str(args.decimate), "--window", f"{window[0]}:{window[1]}"]
-        argv += ["--max-effects", str(args.max_effects), "--json", "--report", str(report)]
+        report.mkdir(parents=True, exist_ok=True)
+        window = WINDOWS[valid]
+        loop = ["loop", *map(str, train), "--validate", str(data / FILES[valid])]
+        loop += ["--input", "displacement_in", "--output", "force_kip", "--time", "time_s"]
+        loop += ["--decimate", str(decimate), "--window", f"{window[0]}:{window[1]}"]
+        loop += ["--init-samples", str(args.init_samples)]
+        loop += ["--max-effects", str(args.max_effects), "--json", "--report", str(report)]
+        if tests:
+            loop += ["--test", *(str(data / FILES[t]) for t in tests)]
+            loop += ["--test-window", *(f"{WINDOWS[t][0]}:{WINDOWS[t][1]}" for t in tests)]
         if args.effects:
-            argv += ["--effects", args.effects]
-        print(f"{run}: jaxcascade {' '.join(argv)}", file=sys.stderr, flush=True)
-        if cli(argv) != 0:
-            raise SystemExit(f"{run}: the loop failed")
+            loop += ["--effects", args.effects]
+        loop += extra
+        print(f"{run}: jaxcascade {' '.join(loop)}", file=sys.stderr, flush=True)
+        measured = run_loop(loop)
+        if measured["returncode"] != 0:
+            raise SystemExit(f"{run}: the loop failed (exit {measured['returncode']})")
         full = json.loads((report / "report.json").read_text())
-        added = full["effect_added"]
-        for i, step in enumerate(full["steps"]):
+        names = {p.name: key for key, p in ((k, data / f) for k, f in FILES.items())}
+        hysteresis = [a for a in full["actions"] if a["effect"] in HYSTERESIS.split(",")]
+        summary = {
+            "run": run,
+            "records": len(train),
+            "decimate": decimate,
+            "seconds": round(measured["seconds"], 1),
+            "peak_rss_mb": round(measured["peak_rss_mb"]),
+            "max_mappings": measured["max_mappings"],
+            "programs_compiled": full["programs_compiled"],
+            "actions": "; ".join(f"{a['action']} {a['effect']}" for a in full["actions"]),
+            "structure": full["structure_after"],
+            "hysteresis_named": bool(hysteresis),
+            "verdict": " ".join(full["verdict"]),
+        }
+        resources.append(summary)
+        for s in full["scores"]:
             rows.append(
                 {
                     "run": run,
-                    "validation": valid,
-                    "model": step["model"],
-                    "nrmse": step["error"],
-                    "window_nrmse": step["window_error"],
-                    "effects": ",".join(added[:i]),
+                    "record": names.get(s["record"], s["record"]),
+                    "role": s["role"],
+                    "model": s["model"],
+                    "window_nrmse": s["window_error"],
+                    "window_nrmse_from_rest": s["window_error_from_rest"],
+                    "nrmse": s["error"],
+                    "nrmse_from_rest": s["error_from_rest"],
                 }
             )
-        for c in full["candidates"]:
-            verdict = "added" if c["name"] in added else "not added"
-            rows.append(
-                {
-                    "run": run,
-                    "validation": valid,
-                    "model": f"candidate (round {c['round']}, DM {c['t']:.2f}, {verdict}): "
-                    + c["variant"],
-                    "nrmse": c["error"],
-                    "window_nrmse": c.get("window_error"),
-                    "effects": ",".join(added[: c["round"] - 1]),
-                }
-            )
-        rows.append(
-            {
-                "run": run,
-                "validation": valid,
-                "model": f"linear ARX ({full['arx']['na']},{full['arx']['nb']})",
-                "nrmse": full["arx"]["error"],
-                "window_nrmse": full["arx"]["window_error"],
-                "effects": "",
-            }
-        )
-        rows.append(lugre_row(train, data / FILES[valid], window, args.decimate, run, valid))
-        times[run] = time.perf_counter() - started
-        for name, value in PUBLISHED[valid].items():
-            rows.append(
-                {
-                    "run": run,
-                    "validation": valid,
-                    "model": f"published: {name} (uses measured force)",
-                    "nrmse": None,
-                    "window_nrmse": value,
-                    "effects": "",
-                }
-            )
-        pd.DataFrame(rows).drop(columns="lugre", errors="ignore").to_csv(
-            out / "table.csv", index=False
-        )
-    table = pd.DataFrame(rows).drop(columns="lugre", errors="ignore")
-    table["fit_percent"] = [
-        fit_percent(v) if v == v and v is not None else None for v in table.nrmse
-    ]
-    table.to_csv(out / "table.csv", index=False)
-    lines = [
-        "# Friction damper (BRFD): model-error loop, window and full-record NRMSE",
-        "",
-        f"Command: `python benchmarks/brfd.py --data {args.data} --out {args.out} "
-        f"--decimate {args.decimate} --max-effects {args.max_effects}"
-        + (f" --only {args.only}" if args.only else "")
-        + (f" --effects {args.effects}" if args.effects else "")
-        + "`",
-        "",
-        "Wall time of each run (loop, ARX and LuGre peers): "
-        + ", ".join(f"{run} {seconds:.0f} s" for run, seconds in times.items()),
-        "",
-        "Estimation: the 30 lb harmonic tests (characterization/index.csv) plus the earthquake "
-        "named, each record simulated from rest; the loop chooses among its candidates on the "
-        "validation record. Window: the strong-motion samples of the data README. Published "
-        "figures use the measured force (sign and initial value); ours use the displacement only.",
-        "",
-        "| run | validation | model | NRMSE | window NRMSE | fit % | effects |",
-        "|---|---|---|---|---|---|---|",
-    ]
-
-    def f(value):
-        return "-" if value is None or value != value else f"{value:.3f}"
-
-    for r in table.to_dict("records"):
-        lines.append(
-            f"| {r['run']} | {r['validation']} | {r['model']} | {f(r['nrmse'])} | "
-            f"{f(r['window_nrmse'])} | {f(r['fit_percent'])} | {r['effects']} |"
-        )
-    (out / "table.md").write_text("\n".join(lines) + "\n")
-    print("\n".join(lines))
+            if s["model"] == "final model":
+                choices.append(
+                    {**summary, "record": names.get(s["record"]), "role": s["role"]}
+                    | {"window_nrmse": s["window_error"]}
+                )
+        if not run.startswith("stability/"):
+            scored = [("validation", valid)] + [("test", t) for t in tests]
+            rows += lugre_rows(train, data, scored, decimate, run)
+            for role, name in scored:
+                for label, value in PUBLISHED[name].items():
+                    rows.append(
+                        {
+                            "run": run,
+                            "record": name,
+                            "role": role,
+                            "model": f"published: {label} (measured force at every sample)",
+                            "window_nrmse": value,
+                        }
+                    )
+        write(out, command, args, rows, resources, choices)
     return 0
+
+
+def f(value) -> str:
+    return "-" if value is None or value != value else f"{value:.3f}"
+
+
+def write(out, command, args, rows, resources, choices) -> None:
+    import pandas as pd
+
+    table = pd.DataFrame(rows)
+    main_rows = table[~table.run.str.startswith("stability/")]
+    main_rows.to_csv(out / "table.csv", index=False)
+    pd.DataFrame(resources).to_csv(out / "resources.csv", index=False)
+    lines = [
+        "# Friction damper (BRFD): the model-error loop, initialised and from rest",
+        "",
+        f"Command: `{command}`",
+        "",
+        f"Scored on the strong-motion windows of the data README, each model's state set "
+        f"from the measured force on the {args.init_samples} samples (after decimation) "
+        "before the window (the nonlinear benchmarks' convention; never the parameters), "
+        "the from-rest figure beside. The validation record chose among the loop's "
+        "candidates: only a `test` row is out of sample. Published figures use the "
+        "measured force at every sample (its sign picks the friction level) and their "
+        "checkpoint was chosen on the held-out earthquake.",
+        "",
+        "| run | record | role | model | window NRMSE | window, from rest | NRMSE | "
+        "NRMSE, from rest |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for r in main_rows.to_dict("records"):
+        lines.append(
+            f"| {r['run']} | {r['record']} | {r['role']} | {r['model']} | "
+            f"{f(r.get('window_nrmse'))} | {f(r.get('window_nrmse_from_rest'))} | "
+            f"{f(r.get('nrmse'))} | {f(r.get('nrmse_from_rest'))} |"
+        )
+    lines += [
+        "",
+        "## What each run did and what it cost",
+        "",
+        "| run | records | decimate | effects | structure | wall s | peak RSS MB | "
+        "max mappings | programs compiled |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in resources:
+        if r["run"].startswith("stability/"):
+            continue
+        lines.append(
+            f"| {r['run']} | {r['records']} | {r['decimate']} | {r['actions'] or 'none'} | "
+            f"`{r['structure']}` | {r['seconds']} | {r['peak_rss_mb']} | {r['max_mappings']} | "
+            f"{r['programs_compiled']} |"
+        )
+    verdicts = [r for r in resources if r["verdict"] and not r["run"].startswith("stability/")]
+    if verdicts:
+        lines += ["", "Verdicts (the loop's own words):", ""]
+        lines += [f"- {r['run']}: {r['verdict']}" for r in verdicts]
+    (out / "table.md").write_text("\n".join(lines) + "\n")
+    stable = [c for c in choices if c["run"].startswith("stability/")]
+    if stable:
+        frame = pd.DataFrame(stable)
+        frame.to_csv(out / "stability.csv", index=False)
+        text = [
+            "# Stability of the loop's decision on the damper (issue 21, point 3)",
+            "",
+            f"Command: `{command}`",
+            "",
+            "The robust fit of the declared cascade with `--retries` 0 and 2 and `--seed` "
+            "0, 1, 2; everything else as the main runs.",
+            "",
+            "| run | effects | structure | validation window NRMSE |",
+            "|---|---|---|---|",
+        ]
+        for c in stable:
+            text.append(
+                f"| {c['run']} | {c['actions'] or 'none'} | `{c['structure']}` | "
+                f"{f(c['window_nrmse'])} |"
+            )
+        text += ["", "| direction | distinct decisions | window NRMSE min | max | spread |"]
+        text += ["|---|---|---|---|---|"]
+        for direction in sorted({c["run"].split("_retries")[0] for c in stable}):
+            group = frame[frame.run.str.startswith(direction + "_retries")]
+            decisions = group.actions.fillna("").unique()
+            low, high = group.window_nrmse.min(), group.window_nrmse.max()
+            text.append(
+                f"| {direction.removeprefix('stability/')} | {len(decisions)} "
+                f"({'; '.join(d or 'none' for d in decisions)}) | {low:.3f} | {high:.3f} | "
+                f"{high - low:.3f} |"
+            )
+        (out / "stability.md").write_text("\n".join(text) + "\n")
 
 
 if __name__ == "__main__":

@@ -435,6 +435,8 @@ def model_error_loop(
     effects: tuple[str, ...] | None = None,
     window: tuple[int, int] | None = None,
     progress=None,
+    robust: Robust | None = None,
+    key=None,
 ) -> LoopResult:
     """Run the loop (module docstring) on an estimation and a validation record.
 
@@ -456,6 +458,8 @@ def model_error_loop(
     - `effects`: names of the library to consider (default: all).
     - `window`: `(start, stop)` samples of the validation record also scored
       (`Evaluation.window_error`).
+    - `robust`, `key`: the estimator of the declared cascade (default `Robust()`) and its
+      PRNG key (the multi-start's draws; default `PRNGKey(0)`).
     """
     say = progress or (lambda message: None)
     compiled_before = compile_count()
@@ -475,7 +479,9 @@ def model_error_loop(
 
     if base is None:
         say("fitting the declared cascade (robust estimator)")
-        base = jax.device_get(Robust()(jnp.concatenate(us), jnp.concatenate(ys), orders).params)
+        estimator = Robust() if robust is None else robust
+        fitted = estimator(jnp.concatenate(us), jnp.concatenate(ys), orders, key=key)
+        base = jax.device_get(fitted.params)
         if len(us) > 1:
             say("refining it on every estimation record")
             base = refit(plain(base), _no_effect(base), us, ys)[0].params

@@ -174,10 +174,12 @@ def _windows(texts, decimate: int, records) -> list:
 
 def run_loop(args) -> int:
     # imported here, not at the top: `--help` answers without importing JAX
+    import jax
     import numpy as np
 
     from .._arx import best_arx
     from .._data import Scaling, read_record
+    from .._estimator._robust import Robust
     from .._loop import initialised_output, model_error_loop, simulated_output
     from .._plot._loop import plot_compare
     from .._plot._residuals import save_residual_figures
@@ -188,6 +190,8 @@ def run_loop(args) -> int:
         raise CLIError(f"--max-effects must be >= 0, got {args.max_effects}.")
     if args.decimate < 1:
         raise CLIError(f"--decimate must be an integer >= 1, got {args.decimate}.")
+    if args.retries < 0:
+        raise CLIError(f"--retries must be >= 0, got {args.retries}.")
     if args.init_samples < 0:
         raise CLIError(f"--init-samples must be >= 0, got {args.init_samples}.")
     options = dict(time_column=args.time, decimate=args.decimate, orders=orders)
@@ -228,8 +232,11 @@ def run_loop(args) -> int:
         window=window,
         progress=say,
         effects=_effects(args.effects),
+        robust=Robust(retries=args.retries),
+        key=jax.random.PRNGKey(args.seed),
     )
     full = result.to_dict()
+    full["robust"] = {"retries": args.retries, "seed": args.seed}
     # The ARX peer is fitted on the estimation records joined end to end.
     arx = best_arx(np.concatenate([r.u for r in training]), np.concatenate([r.y for r in training]))
     say("scoring on the validation and test records (initialised and from rest)")
@@ -446,6 +453,19 @@ def add_parser(subparsers) -> None:
         "from the measured output on the N samples (after decimation) before the scored "
         "ones, the nonlinear benchmarks' convention; from-rest figures are reported beside "
         "(default 50; 0 scores from rest only)",
+    )
+    parser.add_argument(
+        "--seed",
+        type=int,
+        default=0,
+        help="PRNG seed of the declared cascade's robust fit (its multi-start draws; default 0)",
+    )
+    parser.add_argument(
+        "--retries",
+        type=int,
+        default=2,
+        help="repeats of the robust fit's multi-start from fresh draws while its estimate "
+        "fails the residual test (default 2)",
     )
     parser.add_argument("--report", default=None, help="folder for the report and figures")
     parser.add_argument("--json", action="store_true", help="print the JSON summary")
