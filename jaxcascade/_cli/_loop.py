@@ -233,6 +233,7 @@ def run_loop(args) -> int:
         progress=say,
         effects=_effects(args.effects),
         robust=Robust(retries=args.retries),
+        init_samples=args.init_samples,
         key=jax.random.PRNGKey(args.seed),
     )
     full = result.to_dict()
