@@ -28,7 +28,20 @@ estimate at t: the whole procedure is on-line.
 factor that tends to 1, for a system that does not change (early regressors, built from
 poor estimates, fade like a power of the elapsed fraction of the record); `lam < 1`: a
 constant memory, for tracking (and, noise-free, exact convergence: the start is
-forgotten exponentially).
+forgotten exponentially). Default: `lam = 1`, `memory0 = 200`, `growth = 0.25`, the
+schedule that tends to 1 (of those measured, the one closest to the batch estimate at SNR
+25: `results/recursive_vs_batch.md`).
+
+**What is measured** (`benchmarks/recursive_noise_free.py`, `recursive_vs_batch.py`).
+The true parameters are an exact fixed point (zero a-priori error at every sample,
+noise-free). But the recursion approaches it slowly: each update sees a memory of a few
+hundred samples, and the paper's fixed-point map contracts only when each of its steps
+sees a long record (its batch steps on 200-sample segments do not converge even from 1%
+off the truth). Noise-free, one pass from the paper's initial values reaches 1e-6 on no
+record of either example at the paper's lengths (Example 1: the largest error's median
+is 3e-3 with `lam = 0.99`; Example 2: none within 0.05); at SNR 25 the final estimate's
+RMSE is 3 to 38 times the batch iteration's. `passes > 1` (off-line) recovers most
+records exactly. `project` keeps the estimate admissible (Ljung's projection).
 """
 
 from __future__ import annotations
