@@ -10,12 +10,14 @@ Example 1 (input uniform in (-2, 2)); realisation i is the record `jaxcascade re
 
 - `literal`: the paper's iteration (eqs. 19-28) from its initial values, at its defaults;
 - `recursive`: one on-line pass of `Recursive` at its defaults: the forgetting factor
-  `lam_k = min(1, 1 - 1 / (200 + 0.25 k))` tends to 1 (the memory starts at 200 samples
-  and grows by a quarter sample per sample: the first iteration's and early regressors,
-  built from poor estimates, fade; `_online.forgetting`);
-- `recursive_growth1`: another schedule that tends to 1, `lam_k = 1 - 1 / (100 + k)`
-  (sample s weighs about s / k at time k: the start fades faster, the variance is 4/3
-  that of uniform weights).
+  `lam_k = 1 - 1 / (10 + 0.25 k)` tends to 1 (the memory starts at 10 samples after the
+  on-line first iteration, whose information is kept, and grows by a quarter sample per
+  sample: early regressors, built from poor estimates, fade; `_online.forgetting`);
+- `recursive_growth1`: a memory that grows faster, `lam_k = 1 - 1 / (10 + k)` (sample s
+  weighs about s / k at time k: closer to uniform weights, the start fades slower).
+
+The defaults were chosen on records 0..63 (`--seed 0`); the committed table uses
+`--seed 1000` (records 1000..1199), records the choice never saw.
 
 Per estimator and parameter: the RMSE of the final estimate over all realisations
 (whatever the status), its Monte-Carlo standard error (delta method:
@@ -35,7 +37,7 @@ import numpy as np
 VARIANTS = {
     "literal": ("literal", {}),
     "recursive": ("recursive", {}),
-    "recursive_growth1": ("recursive", {"memory0": 100.0, "growth": 1.0}),
+    "recursive_growth1": ("recursive", {"growth": 1.0}),
 }
 
 
@@ -140,8 +142,9 @@ def markdown(frame, args) -> str:
         "RMSE of the final estimate over all realisations (± Monte-Carlo standard error); "
         "ratio to the literal iteration's RMSE on the same records (± paired bootstrap "
         "SE). `recursive`: one on-line pass, forgetting factor "
-        "`lam_k = min(1, 1 - 1/(200 + 0.25 k))`, which tends to 1; `recursive_growth1`: "
-        "`lam_k = 1 - 1/(100 + k)`.",
+        "`lam_k = 1 - 1/(10 + 0.25 k)`, which tends to 1; `recursive_growth1`: "
+        "`lam_k = 1 - 1/(10 + k)`. The defaults were chosen on records 0..63; these are "
+        "records the choice never saw when SEED is 1000.",
         "",
         "| parameter | "
         + " | ".join(f"{label} RMSE" for label in labels)

@@ -66,7 +66,7 @@ recursive() {  # issue 25: the recursive estimator: speed, noise-free, vs batch,
     jaxcascade bench --estimator recursive --out results/bench_recursive.csv --json \
         > results/bench_recursive.json
     python benchmarks/recursive_noise_free.py --out results/recursive_noise_free
-    python benchmarks/recursive_vs_batch.py --out results/recursive_vs_batch
+    python benchmarks/recursive_vs_batch.py --seed 1000 --out results/recursive_vs_batch
     python benchmarks/recursive_tracking.py --out results/recursive_tracking
 }
 

@@ -6,7 +6,8 @@ eqs. 17 and 23-25 built from the current estimate (the same window of past signa
 then the recursive least-squares update of each block where it is active, with the same
 forgetting schedule, anti-windup variants, projection and on-line first iteration
 (`_estimator._recursive`'s docstring says what each step is). Vectors are in
-`Orders.names` order; theta (eq. 18) ends in `C = cR mR`.
+`Orders.names` order; theta (eq. 18) ends in `C = cR mR`, and the recursion holds the
+breakpoint coefficients as `D M` (unit slopes in their columns).
 """
 
 from __future__ import annotations
@@ -33,24 +34,16 @@ def _params(theta: np.ndarray) -> np.ndarray:
     return out
 
 
-def _after_first(theta, init_theta, o: Orders):
-    out = np.concatenate([theta[o.static_dynamic], init_theta[o.backlash]])
+def _model(theta, init_theta, o: Orders):
+    """Breakpoint coefficients `D M` -> `D` (a zero slope keeps the initial breakpoint)."""
+    out = theta.copy()
     s = o.slices
     for D, M in (("DR", "MR"), ("DL", "ML")):
-        DM, slope = out[s[D]].copy(), out[s[M]][1:]
-        for i in range(len(DM)):
-            ratio = DM[i] / slope[i] if slope[i] != 0 else np.inf
+        for i in range(s[D].stop - s[D].start):
+            slope = theta[s[M].start + 1 + i]
+            ratio = theta[s[D].start + i] / slope if slope != 0 else np.inf
             out[s[D].start + i] = ratio if np.isfinite(ratio) else init_theta[s[D].start + i]
     return out
-
-
-def _scale(theta, o: Orders):
-    s = o.slices
-    scale = np.ones_like(theta)
-    for D, M in (("DR", "MR"), ("DL", "ML")):
-        slope = theta[s[M]][1:]
-        scale[s[D]] = np.where(slope != 0, 1.0 / np.where(slope != 0, slope, 1.0), 1.0)
-    return scale
 
 
 def _pwl(p, u: float) -> float:
@@ -101,7 +94,7 @@ def recursive(
     orders: Orders,
     *,
     lam=1.0,
-    memory0=200.0,
+    memory0=10.0,
     growth=0.25,
     first_samples=400,
     anti_windup="none",
@@ -120,19 +113,19 @@ def recursive(
     init_theta[-1] = init[-1] * init[-2]
     first_parts = unpack(np.where(_is_slope(o), 1.0, init), o)
     b1 = o.g1_columns
-    theta = init_theta.copy()
+    theta = init_theta.copy()  # the breakpoint coefficients are D M throughout
+    for D, M in (("DR", "MR"), ("DL", "ML")):
+        theta[o.slices[D]] = init_theta[o.slices[D]] * init_theta[o.slices[M]][1:]
     P1, P2 = delta * np.eye(b1), delta * np.eye(2)
     lags = max(o.r, o.p, 1)
     x = np.zeros(len(u))
     for t in range(len(u)):
         first = t < first_samples
         if t == first_samples and first_samples > 0:
-            scale = _scale(theta, o)[:b1]
-            P1 = P1 * np.outer(scale, scale)
             P2 = delta * np.eye(2)
-            theta = _after_first(theta, init_theta, o)
+            theta = np.concatenate([theta[o.static_dynamic], init_theta[o.backlash]])
             x[max(t - lags, 0) : t] = y[max(t - lags, 0) : t]  # x ~ y before the switch
-        p = unpack(_params(theta), o)
+        p = unpack(_params(_model(theta, init_theta, o)), o)
 
         def past(signal, lag, t=t):
             return signal[t - lag] if t - lag >= 0 else 0.0
@@ -150,7 +143,7 @@ def recursive(
             parts = p
         x[t] = x_t
         phi, yc, g1, g2 = _row(
-            parts, o, past(u, 1), y[t], past(y, 1), v_past, x_t, x_past, unit_slopes=first
+            parts, o, past(u, 1), y[t], past(y, 1), v_past, x_t, x_past, unit_slopes=True
         )
         error = yc - phi @ theta
         lam_t = 1.0 if first else min(lam, 1.0 - 1.0 / (memory0 + growth * (t - first_samples)))
@@ -164,9 +157,10 @@ def recursive(
             new[b1:], new_P2 = _update(
                 theta[b1:], P2, phi[b1:], error, lam_t, anti_windup, trace_max
             )
-        if first or not project or is_admissible(_params(new), o, u_min, u_max):
+        model = _params(_model(new, init_theta, o))
+        if first or not project or is_admissible(model, o, u_min, u_max):
             theta, P1, P2 = new, new_P1, new_P2
-    return _vector(theta)
+    return _vector(_model(theta, init_theta, o))
 
 
 def _is_slope(o: Orders) -> np.ndarray:
