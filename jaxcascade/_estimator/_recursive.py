@@ -326,7 +326,11 @@ def _recursive(
         x_w = jnp.concatenate([x_past, x_t[None]])
         current = jax.tree.map(lambda f, p: jnp.where(first, f, p), first_params, params)
         phi, yc, g1, g2 = sample_regression(
-            current, u_w, y_w, jnp.where(first, u_w, v_w), jnp.where(first, y_w, x_w),
+            current,
+            u_w,
+            y_w,
+            jnp.where(first, u_w, v_w),
+            jnp.where(first, y_w, x_w),
             unit_slopes=True,
         )
         error = yc - phi @ theta
