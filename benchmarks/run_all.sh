@@ -62,9 +62,16 @@ reproduce() {  # issue 2: the paper's examples
             > /dev/null
     done; done; done
 }
+recursive() {  # issue 25: the recursive estimator: speed, noise-free, vs batch, tracking
+    jaxcascade bench --estimator recursive --out results/bench_recursive.csv --json \
+        > results/bench_recursive.json
+    python benchmarks/recursive_noise_free.py --out results/recursive_noise_free
+    python benchmarks/recursive_vs_batch.py --seed 1000 --out results/recursive_vs_batch
+    python benchmarks/recursive_tracking.py --out results/recursive_tracking
+}
 
 steps=("$@")
-[ ${#steps[@]} -gt 0 ] || steps=(bench bench_robust distributed robust sweeps literal efficiency loop reproduce)
+[ ${#steps[@]} -gt 0 ] || steps=(bench bench_robust distributed robust sweeps literal efficiency loop reproduce recursive)
 for step in "${steps[@]}"; do
     echo "== $step"
     "$step"

@@ -88,6 +88,62 @@ def run_robust_bench(args) -> int:
     return 0
 
 
+def _recursive_report(r: dict) -> str:
+    return "\n".join(
+        [
+            f"workload: recursive over Example {r['example']}, N = {r['n']}, SNR {r['snr']:g}, "
+            f"{r['realisations']} records at once",
+            f"device: {r['device']}",
+            f"jaxcascade: {r['updates_per_s']:.3g} sample updates/s ({r['run_s']:.3f} s per "
+            f"run; compile {r['compile_s']:.2f} s; statuses {r['status_counts']})",
+            f"numpy loop: {r['baseline_updates_per_s']:.3g} sample updates/s "
+            f"({r['baseline_realisations']} records in {r['baseline_s']:.2f} s; largest "
+            f"difference of the estimates {r['baseline_max_difference']:.1e})",
+            f"ratio to the numpy loop: {r['ratio']:.0f}",
+            f"real-time factor at {r['sample_rate_hz']:g} Hz per record: "
+            f"{r['real_time_factor']:.0f}",
+        ]
+    )
+
+
+def run_recursive_bench(args) -> int:
+    from .._benchmark import _recursive as recursive_bench
+    from .._examples import example as get_example
+
+    ex = get_example(args.example)
+    n = args.n if args.n is not None else ex.n_samples
+    realisations = args.realisations if args.realisations is not None else 256
+    baseline = args.baseline_realisations if args.baseline_realisations is not None else 2
+    checks = {
+        "--realisations": (realisations, 1),
+        "--n": (n, ex.orders.min_samples),
+        "--baseline-realisations": (baseline, 1),
+        "--repeats": (args.repeats, 1),
+    }
+    for flag, (value, low) in checks.items():
+        if value < low:
+            raise CLIError(f"{flag} must be at least {low}, got {value}.")
+    if baseline > realisations:
+        raise CLIError(
+            f"--baseline-realisations ({baseline}) cannot exceed --realisations ({realisations})."
+        )
+    if not args.sample_rate > 0:
+        raise CLIError(f"--sample-rate must be positive, got {args.sample_rate}.")
+    defaults = recursive_bench.default_first_samples()
+    if n <= defaults:
+        raise CLIError(f"--n must exceed the recursion's first iteration ({defaults} samples).")
+    out = pathlib.Path(args.out) if args.out else None
+    if out is not None:
+        writable_folder(out.parent, "--out")
+    record = recursive_bench.run_benchmark(
+        realisations, n, args.example, baseline, args.repeats, args.seed, args.sample_rate
+    )
+    if out is not None:
+        _write_csv({k: v for k, v in record.items() if k != "settings"}, out)
+    print(strict_json(recursive_bench.summary(record)) if args.json else _recursive_report(record))
+    return 0
+
+
 def run_bench(args) -> int:
     # imported here, not at the top: `--help` answers without importing JAX
     from .._benchmark._timing import run_benchmark, summary
@@ -95,6 +151,10 @@ def run_bench(args) -> int:
 
     if args.estimator == "robust":
         return run_robust_bench(args)
+    if args.estimator == "recursive":
+        if args.system != "example1":
+            raise CLIError("--system applies to --estimator robust (recursive: --example).")
+        return run_recursive_bench(args)
     if args.system != "example1":
         raise CLIError("--system applies to --estimator robust (the literal bench is --example).")
     args.realisations = 1000 if args.realisations is None else args.realisations
@@ -148,14 +208,16 @@ def add_parser(subparsers) -> None:
         epilog=examples(
             "jaxcascade bench --realisations 200 --n 2000 --json --out results/bench.csv",
             "jaxcascade bench --estimator robust --system example2 --json",
+            "jaxcascade bench --estimator recursive --json",
         ),
     )
     parser.add_argument(
         "--estimator",
         default="literal",
-        choices=("literal", "robust"),
+        choices=("literal", "robust", "recursive"),
         help="literal (default): a fixed number of Vörös iterations; robust: `robust` at "
-        "its defaults against a SciPy output-error multi-start",
+        "its defaults against a SciPy output-error multi-start; recursive: sample updates "
+        "per second of the recursive estimator against a NumPy loop",
     )
     parser.add_argument(
         "--system",
@@ -165,14 +227,18 @@ def add_parser(subparsers) -> None:
         "the random family, N 3000 SNR 30)",
     )
     parser.add_argument(
-        "--realisations", type=int, default=None, metavar="R", help="default 1000; robust 256"
+        "--realisations",
+        type=int,
+        default=None,
+        metavar="R",
+        help="default 1000; robust, recursive 256",
     )
     parser.add_argument(
         "--n",
         type=int,
         default=None,
         metavar="N",
-        help="samples per record (default 4000; robust: the system's)",
+        help="samples per record (default 4000; robust: the system's; recursive: the example's)",
     )
     parser.add_argument(
         "--iterations",
@@ -193,7 +259,7 @@ def add_parser(subparsers) -> None:
         type=int,
         default=None,
         metavar="B",
-        help="realisations timed with the baseline (default 20; robust 8)",
+        help="realisations timed with the baseline (default 20; robust 8; recursive 2)",
     )
     parser.add_argument(
         "--baseline-threads",
@@ -208,6 +274,14 @@ def add_parser(subparsers) -> None:
         "--repeats", type=int, default=3, help="timed runs; the best counts (robust: 1 is enough)"
     )
     parser.add_argument("--seed", type=int, default=0, help="PRNG seed of the records (default 0)")
+    parser.add_argument(
+        "--sample-rate",
+        type=float,
+        default=1000.0,
+        metavar="HZ",
+        help="recursive: the sample rate of each record's stream for the real-time factor "
+        "(default 1000 Hz)",
+    )
     parser.add_argument(
         "--backend",
         default="auto",

@@ -13,10 +13,11 @@ from typing import Any
 
 from ._base import Estimator
 from ._literal import Literal
+from ._recursive import Recursive
 from ._robust import Robust
 from ._solution import Solution, solution_table
 
-ESTIMATORS: dict[str, type[Estimator]] = {cls.name: cls for cls in (Literal, Robust)}
+ESTIMATORS: dict[str, type[Estimator]] = {cls.name: cls for cls in (Literal, Robust, Recursive)}
 
 
 def estimator(name: str, **settings: Any) -> Estimator:

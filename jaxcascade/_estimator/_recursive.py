@@ -1,0 +1,520 @@
+"""The paper's estimator in recursive least-squares form (Vörös 2016, conclusion): the
+key-term regression (eqs. 16-18) solved sample by sample, with forgetting.
+
+The paper's closing remark: the model "can be applied for on-line identification ...
+using the known recursive least-squares algorithm". Here each sample t
+
+1. rebuilds the internal variables from the current estimate, as eqs. 19-25 do for the
+   whole record: `v(t-i)` from the piecewise-linear block (eq. 21) at the window's
+   inputs, `x(t)` from the linear block's recursion (eq. 22) on the past `x` the
+   recursion itself produced, then g1, g2 (eqs. 23-24), `yc(t)` (eq. 25) and `phi(t)`
+   (eq. 17; `_online.sample_regression`);
+2. updates theta by recursive least squares (`_online.update`) on the a-priori error
+   `yc(t) - phi(t) theta`, each of the regression's two blocks (the g1 and the g2
+   columns, disjoint in time) where it is active.
+
+**Breakpoints as `D M`.** Eq. 17's breakpoint columns are `-M_i h(D_{i-1} - u(t-1))`
+with coefficient `D_{i-1}`. In a recursion that column vanishes whenever the running
+estimate of a slope increment passes near 0, and the breakpoint then drifts with
+nothing to hold it (noise-free Example 1 with `lam = 0.99`: 27 of 100 records ended
+more than 0.05 from the truth, `results/recursive_noise_free.md` at commit 3d178d6).
+So the recursion keeps the paper's first-iteration form throughout: unit slopes in
+those columns (`_regression.regression(..., unit_slopes=True)`) and the
+coefficient `D M`, divided by the slope estimate wherever `D` itself is needed (the
+switching functions, the piecewise-linear block, the estimate returned; a slope of 0
+keeps the initial breakpoint). The same model, the same fixed point; only the
+coordinates of the recursion change (with them all 100 reach 1e-6 at `lam = 0.98`).
+
+**The start is the paper's first iteration, on-line.** The first `first_samples` samples
+are the first iteration's regression (v ~ u, x ~ y, the backlash at its initial values:
+`_literal.first_iteration`) accumulated with no forgetting, from the same initial values
+as `voros` (`_literal.initial_guess`). At sample `first_samples` its NS and LD estimates
+and their information are kept, the backlash restarts at its initial values (its block's
+`P` at `delta I`), the past `x` are taken as the past `y` (the first iteration's
+approximation), and the full recursion starts. Only samples up to t ever enter the
+estimate at t: the whole procedure is on-line.
+
+**Forgetting** (`_online.forgetting`): the memory `1 / (1 - lam_k)` starts at
+`memory0` samples and grows by `growth` per sample up to `1 / (1 - lam)`. `lam = 1`: a
+factor that tends to 1, for a system that does not change (early regressors, built from
+poor estimates, fade like a power of the elapsed fraction of the record); `lam < 1`: a
+constant memory, for tracking (and, noise-free, exact convergence: the start is
+forgotten exponentially). Default: `lam = 1`, `memory0 = 10`, `growth = 0.25`, the
+schedule `lam_k = 1 - 1 / (10 + 0.25 k)` that tends to 1 (after the first iteration,
+whose information is kept, a short memory forgets the poorest regressors quickly; the
+slow growth keeps forgetting the transient while the weights flatten). Chosen among
+about ten schedules on 64 Example 1 records at SNR 25 (the final RMSE closest to the batch
+iteration's), then measured on 200 others (`results/recursive_vs_batch.md`).
+
+**What is measured** (`benchmarks/recursive_noise_free.py`, `recursive_vs_batch.py`).
+The true parameters are an exact fixed point (zero a-priori error at every sample,
+noise-free). Noise-free, one on-line pass from the paper's initial values reaches 1e-6
+on every one of 100 Example 1 records at N = 4000 with `lam = 0.98` or `0.95`; on
+Example 2 at N = 2000 on at most about a fifth (`lam = 0.93`; a third of the records
+never come within 0.05: the paper's fixed-point map contracts only when each of its
+steps sees a long record, and its batch steps on 200-sample segments do not converge
+even from 1% off the truth). At SNR 25 the final estimate of the default schedule has
+0.89 to 1.54 times the batch iteration's RMSE per parameter on Example 1. `passes > 1`
+(off-line) recovers most records exactly. `project` keeps the estimate admissible
+(Ljung's projection).
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float, PRNGKeyArray
+
+from .._compile import jit
+from .._model import CascadeParams, Orders, is_admissible
+from .._online import ANTI_WINDUP, forgetting, sample_regression, update, window
+from .._simulate import pwl
+from .._status import Status
+from .._validate import is_traced, record
+from ._base import Estimator, keyword_defaults, setting
+from ._literal import initial_guess
+from ._solution import PATH_ONLY, Solution, finite
+
+
+class Recursion(NamedTuple):
+    """What `recursive` returns.
+
+    - `solution`: the final estimate as a `Solution`; its `history` holds the start (row
+      0) and, with `every = k > 0`, the estimate after samples k, 2k, ... (the last row
+      the final estimate; during the first `first_samples` samples, the first
+      iteration's estimate so far), else the final estimate alone (row 1).
+      `iterations` is the number of sample updates, `cost` the mean squared a-priori
+      error over the samples after the start.
+    - `errors`: `Float[Array, " T"]`, the a-priori prediction error of the corrected
+      output, `yc(t) - phi(t) theta_{t-1}` (zero-length unless `errors=True`).
+    """
+
+    solution: Solution
+    errors: Float[Array, " T"]
+
+
+def recursive(
+    u: Float[Array, " T"],
+    y: Float[Array, " T"],
+    orders: Orders,
+    init: CascadeParams | None = None,
+    *,
+    lam: float = 1.0,
+    memory0: float = 10.0,
+    growth: float = 0.25,
+    first_samples: int = 400,
+    anti_windup: str = "none",
+    delta: float = 1e3,
+    divergence_bound: float = 1e6,
+    every: int = 0,
+    errors: bool = False,
+    project: bool = True,
+    passes: int = 1,
+    input_range: tuple[float, float] | None = None,
+) -> Recursion:
+    """The recursive least-squares form of the paper's estimator on one record.
+
+    **Arguments:**
+
+    - `u`, `y`: input and measured output (checked by `_validate.record`).
+    - `orders`: static model orders.
+    - `init`: initial values; default `initial_guess(orders, min(u), max(u))`.
+    - `lam`, `memory0`, `growth`: the forgetting schedule `lam_k = min(lam, 1 - 1 /
+      (memory0 + growth k))` (`_online.forgetting`), k the samples since the start.
+    - `first_samples`: samples of the on-line first iteration (module docstring).
+    - `anti_windup`: `"none"` (default: exponential forgetting, each block forgotten
+      only where it is active, which already keeps the dead zone from winding `P` up),
+      `"trace"` or `"directional"` (`_online._rls`).
+    - `delta`: `P` starts (and restarts after the first iteration) at `delta I`.
+    - `divergence_bound`: an estimate larger than this is `diverged`.
+    - `every`: keep the estimate every `every` samples (0: only the final one).
+    - `errors`: also return the a-priori prediction errors (of the last pass).
+    - `project`: Ljung's projection: an update that would leave the model's domain is
+      not taken (default on).
+    - `passes`: 1 (default): one pass over the record, on-line. More passes run the
+      recursion over the record again, carrying the estimate and `P` (each pass starts
+      the signals from rest): an off-line use of the recursion, NOT on-line
+      identification (the estimate at sample t then depends on later samples).
+    - `input_range`: `(u_min, u_max)` for the initial breakpoints and the domain check;
+      default the record's range (which an on-line user does not know in advance: pass
+      the input's nominal range).
+
+    **Status:** `converged` when the final estimate is finite and admissible
+    (`is_admissible` on the input's range), `left_domain` when it is not, `diverged`
+    when it became non-finite or exceeded `divergence_bound` (`_solution.finite`), or
+    when a sample's error was not finite (NaN or inf in the record: the projection
+    skips such a sample, and the status says it happened).
+    """
+    u, y = record(u, y, orders=orders, where="recursive")
+    if init is not None and not isinstance(init, CascadeParams):
+        raise TypeError(f"recursive: init must be CascadeParams, got {type(init).__name__}.")
+    check_settings(lam, memory0, growth, first_samples, anti_windup, delta, every, passes)
+    if first_samples >= u.shape[0]:
+        raise ValueError(
+            f"recursive: first_samples = {first_samples} leaves nothing of a record of "
+            f"{u.shape[0]} samples; use fewer."
+        )
+    return _recursive(
+        u,
+        y,
+        orders,
+        init,
+        input_range,
+        lam=lam,
+        memory0=memory0,
+        growth=growth,
+        first_samples=first_samples,
+        anti_windup=anti_windup,
+        delta=delta,
+        divergence_bound=divergence_bound,
+        every=every,
+        errors=errors,
+        project=project,
+        passes=passes,
+    )
+
+
+def check_settings(lam, memory0, growth, first_samples, anti_windup, delta, every, passes=1):
+    """A `ValueError` naming the first bad setting (checked once, before tracing)."""
+    if not 0 < lam <= 1:
+        raise ValueError(f"recursive: lam must lie in (0, 1], got {lam}.")
+    if not memory0 >= 1:
+        raise ValueError(f"recursive: memory0 must be at least 1 sample, got {memory0}.")
+    if not growth >= 0:
+        raise ValueError(f"recursive: growth must be non-negative, got {growth}.")
+    if isinstance(first_samples, bool) or not isinstance(first_samples, int | np.integer):
+        raise TypeError(f"recursive: first_samples must be an integer, got {first_samples!r}.")
+    if first_samples < 0:
+        raise ValueError(f"recursive: first_samples must be non-negative, got {first_samples}.")
+    if anti_windup not in ANTI_WINDUP:
+        raise ValueError(
+            f"recursive: unknown anti_windup {anti_windup!r}; known: {', '.join(ANTI_WINDUP)}."
+        )
+    if not delta > 0:
+        raise ValueError(f"recursive: delta must be positive, got {delta}.")
+    if isinstance(every, bool) or not isinstance(every, int | np.integer) or every < 0:
+        raise ValueError(f"recursive: every must be a non-negative integer, got {every!r}.")
+    if isinstance(passes, bool) or not isinstance(passes, int | np.integer) or passes < 1:
+        raise ValueError(f"recursive: passes must be a positive integer, got {passes!r}.")
+
+
+def _vector(theta, orders):
+    """theta (eq. 18, ending in `C = cR mR`) -> `Orders.names` order, without dividing by
+    zero (a zero `mR` gives a non-finite `cR`, which `finite` turns into a status)."""
+    mR = theta[-2]
+    return theta.at[-1].set(theta[-1] / mR)
+
+
+def _params(theta, orders):
+    mR = theta[-2]
+    safe = jnp.where(mR != 0, mR, jnp.finfo(theta.dtype).eps)
+    return CascadeParams.from_vector(theta.at[-1].set(theta[-1] / safe), orders, check=False)
+
+
+def _after_first(theta, init_theta, orders):
+    """The first iteration's estimate: NS and LD coefficients with `D M / M` (a zero
+    slope keeps the initial breakpoint), the backlash at its initial values."""
+    o = orders
+    s = o.slices
+    out = jnp.concatenate([theta[o.static_dynamic], init_theta[o.backlash]])
+    for D, M in (("DR", "MR"), ("DL", "ML")):
+        DM, slope = out[s[D]], out[s[M]][1:]
+        ok = (slope != 0) & jnp.isfinite(DM / jnp.where(slope != 0, slope, 1.0))
+        out = out.at[s[D]].set(jnp.where(ok, DM / jnp.where(ok, slope, 1.0), init_theta[s[D]]))
+    return out
+
+
+def _divide_breakpoints(theta, init_theta, orders):
+    """theta with breakpoint coefficients `D M` (unit-slope columns) -> `D` (a zero or
+    non-finite quotient keeps the initial breakpoint)."""
+    s = orders.slices
+    out = theta
+    for D, M in (("DR", "MR"), ("DL", "ML")):
+        DM, slope = theta[s[D]], theta[s[M]][1:]
+        ok = (slope != 0) & jnp.isfinite(DM / jnp.where(slope != 0, slope, 1.0))
+        out = out.at[s[D]].set(jnp.where(ok, DM / jnp.where(ok, slope, 1.0), init_theta[s[D]]))
+    return out
+
+
+def _multiply_breakpoints(theta, orders):
+    s = orders.slices
+    out = theta
+    for D, M in (("DR", "MR"), ("DL", "ML")):
+        out = out.at[s[D]].set(theta[s[D]] * theta[s[M]][1:])
+    return out
+
+
+@jit(
+    static_argnames=(
+        "orders",
+        "first_samples",
+        "anti_windup",
+        "every",
+        "errors",
+        "project",
+        "passes",
+    )
+)
+def _recursive(
+    u,
+    y,
+    orders: Orders,
+    init: CascadeParams | None,
+    input_range,
+    *,
+    lam,
+    memory0,
+    growth,
+    first_samples: int,
+    anti_windup: str,
+    delta,
+    divergence_bound,
+    every: int,
+    errors: bool,
+    project: bool,
+    passes: int,
+) -> Recursion:
+    o = orders
+    dtype = u.dtype
+    y = y.astype(dtype)
+    T = u.shape[0]
+    if input_range is None:
+        u_min, u_max = jnp.min(u), jnp.max(u)
+    else:
+        u_min, u_max = (jnp.asarray(b, dtype) for b in input_range)
+    if init is None:
+        init = initial_guess(o, u_min, u_max, dtype)
+    init = init.astype(dtype)
+    start = init.to_vector()
+    init_theta = init.to_theta()
+    # the first iteration's switching functions: unit slopes, the initial breakpoints
+    # and backlash (`_regression.regression(..., unit_slopes=True)`)
+    first_params = _unit_slopes(init)
+    W = window(o)
+    b1 = o.g1_columns
+    trace_max = jnp.asarray(delta, dtype) * o.size
+
+    def model(theta):
+        return _divide_breakpoints(theta, init_theta, o)
+
+    def step(carry, inputs):
+        theta, P1, P2, u_past, y_past, x_past, sq = carry
+        k, u_t, y_t, valid = inputs  # k: samples since the start, over all passes
+        t = k % T
+        first = k < first_samples
+        switch = (k == first_samples) & (first_samples > 0)
+        # the end of the first iteration: its NS and LD estimates and their information
+        # stay, the backlash restarts at its initial values
+        kept = jnp.concatenate([theta[o.static_dynamic], init_theta[o.backlash]])
+        theta = jnp.where(switch, kept, theta)
+        P2 = jnp.where(switch, delta * jnp.eye(2, dtype=dtype), P2)
+        x_past = jnp.where(switch, y_past, x_past)
+        # a new pass starts from rest, as the record does
+        restart = (t == 0) & (k > 0)
+        u_past, y_past, x_past = (jnp.where(restart, 0.0, z) for z in (u_past, y_past, x_past))
+
+        params = _params(model(theta), o)
+        u_w = jnp.concatenate([u_past, u_t[None]])
+        y_w = jnp.concatenate([y_past, y_t[None]])
+        v_w = pwl(params, u_w)  # eq. 21 at the window's inputs
+        # eq. 22, a1 = 1: x(t) = v(t-1) + a2 v(t-2) + ... - b1 x(t-1) - ...
+        a = jnp.concatenate([jnp.ones((1,), dtype), params.a])
+        x_t = a @ v_w[W - 2 :: -1][: o.r] - params.b @ x_past[::-1][: o.p]
+        x_w = jnp.concatenate([x_past, x_t[None]])
+        current = jax.tree.map(lambda f, p: jnp.where(first, f, p), first_params, params)
+        phi, yc, g1, g2 = sample_regression(
+            current,
+            u_w,
+            y_w,
+            jnp.where(first, u_w, v_w),
+            jnp.where(first, y_w, x_w),
+            unit_slopes=True,
+        )
+        error = yc - phi @ theta
+        lam_k = jnp.where(first, 1.0, forgetting(k - first_samples, lam, memory0, growth))
+        new1, new_P1 = update(
+            theta[:b1],
+            P1,
+            phi[:b1],
+            error,
+            lam_k,
+            valid & (g1 > 0),
+            anti_windup=anti_windup,
+            trace_max=trace_max,
+        )
+        new2, new_P2 = update(
+            theta[b1:],
+            P2,
+            phi[b1:],
+            error,
+            lam_k,
+            valid & (g2 > 0),
+            anti_windup=anti_windup,
+            trace_max=trace_max,
+        )
+        proposal = jnp.concatenate([new1, new2])
+        if project:
+            # Ljung's projection: an update that takes the estimate out of the model's
+            # domain (a breakpoint outside the input range, mR <= 0, an unstable linear
+            # block) is not taken. The first iteration's coefficients are no model yet.
+            keep = first | is_admissible(_params(model(proposal), o), u_min, u_max)
+        else:
+            keep = jnp.asarray(True)
+        theta = jnp.where(keep, proposal, theta)
+        P1 = jnp.where(keep, new_P1, P1)
+        P2 = jnp.where(keep, new_P2, P2)
+        u_past = jnp.where(valid, u_w[1:], u_past)
+        y_past = jnp.where(valid, y_w[1:], y_past)
+        x_past = jnp.where(valid, x_w[1:], x_past)
+        # [sum of squared errors, their count, non-finite samples]: a NaN in the record
+        # is never taken by the projection, so it is counted here to reach the status
+        finite_error = jnp.isfinite(error)
+        counted = jnp.stack(
+            [jnp.where(finite_error, error**2, 0.0), jnp.ones((), dtype), (~finite_error) * 1.0]
+        )
+        sq = sq + jnp.where(valid & (~first | ~finite_error), counted, 0.0)
+        estimate = jnp.where(first, _after_first(theta, init_theta, o), model(theta))
+        return (theta, P1, P2, u_past, y_past, x_past, sq), (estimate, error)
+
+    zeros = jnp.zeros((W - 1,), dtype)
+    carry = (
+        _multiply_breakpoints(init_theta, o),
+        delta * jnp.eye(b1, dtype=dtype),
+        delta * jnp.eye(2, dtype=dtype),
+        zeros,
+        zeros,
+        zeros,
+        jnp.zeros((3,), dtype),
+    )
+    total = passes * T
+    k = jnp.arange(total)
+    u_all, y_all = jnp.tile(u, passes), jnp.tile(y, passes)
+    valid = jnp.ones((total,), bool)
+    if every == 0:
+
+        def plain(carry, inputs):
+            carry, (_, error) = step(carry, inputs)
+            return carry, error if errors else None
+
+        carry, out = jax.lax.scan(plain, carry, (k, u_all, y_all, valid))
+        error_out = out[-T:] if errors else jnp.zeros((0,), dtype)
+        rows = jnp.zeros((0, o.size), dtype)
+    else:
+        count = -(-total // every)
+        pad = count * every - total
+
+        def blocks(x, fill):
+            return jnp.concatenate([x, jnp.full((pad,), fill, x.dtype)]).reshape(count, every)
+
+        inputs = (blocks(k, total), blocks(u_all, 0.0), blocks(y_all, 0.0), blocks(valid, False))
+
+        def block(carry, inputs):
+            carry, (estimates, error) = jax.lax.scan(step, carry, inputs)
+            return carry, (estimates[-1], error if errors else None)
+
+        carry, (rows, out) = jax.lax.scan(block, carry, inputs)
+        rows = jax.vmap(lambda row: _vector(row, o))(rows)
+        error_out = out.reshape(-1)[:total][-T:] if errors else jnp.zeros((0,), dtype)
+
+    theta, sq = carry[0], carry[-1]
+    vector = _vector(model(theta), o)
+    history = jnp.concatenate([start[None, :], rows if every else vector[None, :]], axis=0)
+    params = CascadeParams.from_vector(vector, o, check=False)
+    admissible = is_admissible(params, u_min, u_max)
+    status = jnp.where(admissible, Status.converged, Status.left_domain)
+    bounded = jnp.all(jnp.abs(vector) <= divergence_bound) & (sq[2] == 0)
+    status = jnp.where(bounded, status, Status.diverged)
+    solution = Solution(
+        params=params,
+        history=history,
+        iterations=jnp.asarray(total, jnp.int32),
+        cost=sq[0] / jnp.maximum(sq[1], 1.0),
+        status=status.astype(jnp.int32),
+        cycle_amplitude=jnp.zeros((), dtype),
+        path=jnp.asarray(PATH_ONLY, jnp.int32),
+    )
+    return Recursion(finite(solution, start), error_out)
+
+
+def _unit_slopes(params: CascadeParams) -> CascadeParams:
+    """`params` with every slope increment 1 (the first iteration's switching functions)."""
+    vector = params.to_vector()
+    s = params.orders.slices
+    vector = vector.at[s["MR"]].set(1.0).at[s["ML"]].set(1.0)
+    return CascadeParams.from_vector(vector, params.orders, check=False)
+
+
+# `recursive`'s settings and their defaults: the one place they are written down.
+_RECURSIVE = keyword_defaults(recursive)
+
+
+class Recursive(Estimator):
+    """The recursive least-squares form of the paper's estimator (`recursive`), one pass
+    over the record, from the paper's initial values (`input_range` as for `Literal`).
+    The settings are `recursive`'s; `every > 0` keeps the estimate every `every` samples
+    in `Solution.history`."""
+
+    name: ClassVar[str] = "recursive"
+    summary: ClassVar[str] = (
+        "the key-term regression (eqs. 16-18) by recursive least squares with forgetting"
+    )
+
+    lam: float = setting(_RECURSIVE["lam"])
+    memory0: float = setting(_RECURSIVE["memory0"])
+    growth: float = setting(_RECURSIVE["growth"])
+    first_samples: int = setting(_RECURSIVE["first_samples"])
+    anti_windup: str = setting(_RECURSIVE["anti_windup"])
+    delta: float = setting(_RECURSIVE["delta"])
+    divergence_bound: float = setting(_RECURSIVE["divergence_bound"])
+    project: bool = setting(_RECURSIVE["project"])
+    passes: int = setting(_RECURSIVE["passes"])
+    every: int = setting(_RECURSIVE["every"])
+
+    def __check_init__(self):
+        check_settings(
+            self.lam,
+            self.memory0,
+            self.growth,
+            self.first_samples,
+            self.anti_windup,
+            self.delta,
+            self.every,
+            self.passes,
+        )
+
+    def __call__(
+        self,
+        u: Float[Array, " T"],
+        y: Float[Array, " T"],
+        orders: Orders,
+        *,
+        key: PRNGKeyArray | None = None,
+        input_range: tuple[float, float] | None = None,
+    ) -> Solution:
+        del key  # deterministic
+        u, y = record(u, y, orders=orders, where="Recursive")
+        if input_range is not None and not any(is_traced(b) for b in input_range):
+            if not float(input_range[0]) < 0 < float(input_range[1]):
+                raise ValueError(
+                    f"Recursive: the input range {tuple(map(float, input_range))} must "
+                    "contain 0 strictly (the initial breakpoints split each side of 0)."
+                )
+        return recursive(
+            u,
+            y,
+            orders,
+            lam=self.lam,
+            memory0=self.memory0,
+            growth=self.growth,
+            first_samples=self.first_samples,
+            anti_windup=self.anti_windup,
+            delta=self.delta,
+            divergence_bound=self.divergence_bound,
+            project=self.project,
+            passes=self.passes,
+            every=self.every,
+            input_range=input_range,
+        ).solution
