@@ -190,6 +190,10 @@ def run_loop(args) -> int:
         raise CLIError(f"--max-effects must be >= 0, got {args.max_effects}.")
     if args.decimate < 1:
         raise CLIError(f"--decimate must be an integer >= 1, got {args.decimate}.")
+    if not args.dm_threshold > 0:
+        raise CLIError(f"--dm-threshold must be positive, got {args.dm_threshold}.")
+    if not 0 <= args.min_gain < 1:
+        raise CLIError(f"--min-gain must be in [0, 1), got {args.min_gain}.")
     if args.retries < 0:
         raise CLIError(f"--retries must be >= 0, got {args.retries}.")
     if args.init_samples < 0:
@@ -234,6 +238,8 @@ def run_loop(args) -> int:
         effects=_effects(args.effects),
         robust=Robust(retries=args.retries),
         init_samples=args.init_samples,
+        t_threshold=args.dm_threshold,
+        min_gain=args.min_gain,
         key=jax.random.PRNGKey(args.seed),
     )
     full = result.to_dict()
@@ -405,6 +411,8 @@ def add_parser(subparsers) -> None:
             "--time t --decimate 4 --report results/loop",
             "jaxcascade loop a.csv b.parquet --validate c.csv --input u --output y "
             "--decimate 8 --window 3072:7680 --json",
+            "jaxcascade loop a.csv --validate b.csv --test c.csv --test-window 6144:14336 "
+            "--input u --output y --init-samples 50 --report results/loop",
         ),
     )
     parser.add_argument(
@@ -454,6 +462,20 @@ def add_parser(subparsers) -> None:
         "from the measured output on the N samples (after decimation) before the scored "
         "ones, the nonlinear benchmarks' convention; from-rest figures are reported beside "
         "(default 50; 0 scores from rest only)",
+    )
+    parser.add_argument(
+        "--dm-threshold",
+        type=float,
+        default=3.0,
+        help="a candidate counts when its Diebold-Mariano statistic against the current "
+        "model exceeds this (default 3: with about ten candidates a round, a one-sided "
+        "level near 0.001 each)",
+    )
+    parser.add_argument(
+        "--min-gain",
+        type=float,
+        default=0.02,
+        help="... and it lowers the validation NRMSE by at least this fraction (default 0.02)",
     )
     parser.add_argument(
         "--seed",
