@@ -504,6 +504,7 @@ def model_error_loop(
         estimator = Robust() if robust is None else robust
         fitted = estimator(jnp.concatenate(us), jnp.concatenate(ys), orders, key=key)
         base = jax.device_get(fitted.params)
+        release()  # the robust estimator's program is the largest of the loop
         if len(us) > 1:
             say("refining it on every estimation record")
             base = refit(plain(base), _no_effect(base), us, ys)[0].params
@@ -543,6 +544,9 @@ def model_error_loop(
         for name, action in [(n, "add") for n in tried] + [(n, "replace") for n in replacing]:
             c = _candidate(name, *fit_against, **judged_by, action=action)
             round_candidates.append(c)
+            # Each candidate compiles programs of its own structure (about a hundred
+            # memory mappings each, measured on the damper): free them at once.
+            release()
             say(
                 f"  {c.label:<24} error {c.error:.4g}  t {c.t:7.2f}  "
                 f"{'significant' if c.significant else ''}"
