@@ -360,7 +360,7 @@ def _name(record) -> str:
 def _units(column: str, scaling: str) -> str:
     if scaling == "none":
         return column
-    return f"{column}, model units ({scaling}d; report.json: records.*.scaling)"
+    return f"{column} ({'scaled' if scaling == 'scale' else 'standardised'})"
 
 
 def _summary(full: dict, folder) -> str:
