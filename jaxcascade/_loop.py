@@ -528,10 +528,15 @@ def model_error_loop(
         ]
         round_candidates = []
         # Effects marked `needs_signature` (the hysteresis effects) only when a test of
-        # their signature failed.
+        # their signature failed, unless the current model is worse than the mean on the
+        # validation record: its residual is then the model's own excursion (a drift, a
+        # wrong basin) and no test's signature can be trusted to point anywhere.
         tried = [n for n in names if n not in added and n not in model.names and n in EFFECTS]
+        trusted = current.error <= 1.0
         tried = [
-            n for n in tried if not EFFECTS[n].needs_signature or failed & set(EFFECTS[n].signature)
+            n
+            for n in tried
+            if not EFFECTS[n].needs_signature or failed & set(EFFECTS[n].signature) or not trusted
         ]
         if not model.cascade:  # no cascade left whose orders a structural effect changes
             tried = [n for n in tried if n not in STRUCTURAL]
