@@ -460,7 +460,8 @@ def test_every_help_ends_with_examples(capsys, command):
     assert exit_.value.code == 0
     lines = capsys.readouterr().out.rstrip().splitlines()
     examples = lines[lines.index("examples:") + 1 :]
-    assert 1 <= len(examples) <= 2
+    # a few examples, each a whole command line: enough to start from, short to read
+    assert 1 <= len(examples) <= 4
     assert all(re.match(rf"  jaxcascade {command}( |$)", line) for line in examples), examples
 
 
