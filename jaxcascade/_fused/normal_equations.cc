@@ -75,13 +75,22 @@ void group(const double* u, const double* y, const double* params, int64_t batch
   for (int l = 0; l < kLanes; ++l) rows[l] = std::min(b0 + l, batch - 1);
   vd* us = scratch;
   vd* ys = scratch + n;
+  // Interleaved sample by sample (each vector written whole, once), not lane by lane
+  // (every lane's pass would touch every vector of `us` and `ys` again).
+  const double* ur[kLanes];
+  const double* yr[kLanes];
   for (int l = 0; l < kLanes; ++l) {
-    const double* ur = u + rows[l] * n;
-    const double* yr = y + rows[l] * n;
-    for (int64_t t = 0; t < n; ++t) {
-      us[t][l] = ur[t];
-      ys[t][l] = yr[t];
+    ur[l] = u + rows[l] * n;
+    yr[l] = y + rows[l] * n;
+  }
+  for (int64_t t = 0; t < n; ++t) {
+    vd ut, yt;
+    for (int l = 0; l < kLanes; ++l) {
+      ut[l] = ur[l][t];
+      yt[l] = yr[l][t];
     }
+    us[t] = ut;
+    ys[t] = yt;
   }
   // Parameters, one vector per parameter (lane = record).
   vd theta[kMaxColumns + 3];
