@@ -63,8 +63,27 @@ struct Dynamic {
 template <class O>
 int64_t size(const O& o) { return o.nR + o.nR - 1 + o.nL + o.nL - 1 + (o.r - 1) + o.p + 3; }
 
-// Records [b0, b0 + 4) of the batch (indices past the end repeat the last record).
-// `scratch` holds u and y of the four records, interleaved by lane (2 n vectors), then
+// Adds `block` buffered rows into the Gram tile of rows c .. c + Rows - 1 and columns
+// d .. d + Cols - 1, its sums held in registers over the block. Every entry is summed over
+// the samples in the same order whatever the tile's shape.
+template <int Rows, int Cols>
+inline void tile(vd* G, const vd* rows_, int64_t W, int64_t block, int64_t c, int64_t d) {
+  vd s[Rows][Cols];
+  for (int i = 0; i < Rows; ++i)
+    for (int j = 0; j < Cols; ++j) s[i][j] = G[(c + i) * W + d + j];
+  for (int64_t k = 0; k < block; ++k) {
+    const vd* row = rows_ + k * W;
+    for (int i = 0; i < Rows; ++i) {
+      const vd x = row[c + i];
+      for (int j = 0; j < Cols; ++j) s[i][j] += x * row[d + j];
+    }
+  }
+  for (int i = 0; i < Rows; ++i)
+    for (int j = 0; j < Cols; ++j) G[(c + i) * W + d + j] = s[i][j];
+}
+
+// Records [b0, b0 + kLanes) of the batch (indices past the end repeat the last record).
+// `scratch` holds u and y of these records, interleaved by lane (2 n vectors), then
 // the Gram matrix and the row buffer of block 1 (`scratch_size`).
 template <bool First, class O>
 void group(const double* u, const double* y, const double* params, int64_t batch, int64_t n,
@@ -186,26 +205,17 @@ void group(const double* u, const double* y, const double* params, int64_t batch
     y_prev = y_t;
   }
   // The block's rows into the Gram matrix: tiles of rows (c, c + 1) x columns
-  // (d .. d + 3), for every tile that reaches the lower triangle.
-  for (int64_t c = 0; c < W; c += 2) {
-    for (int64_t d = 0; d <= c + 1 && d < W; d += 4) {
-      vd s0[4], s1[4];
-      for (int j = 0; j < 4; ++j) {
-        s0[j] = G[c * W + d + j];
-        s1[j] = G[(c + 1) * W + d + j];
-      }
-      for (int64_t k = 0; k < block; ++k) {
-        const vd* row = rows_ + k * W;
-        const vd x0 = row[c], x1 = row[c + 1];
-        for (int j = 0; j < 4; ++j) {
-          s0[j] += x0 * row[d + j];
-          s1[j] += x1 * row[d + j];
-        }
-      }
-      for (int j = 0; j < 4; ++j) {
-        G[c * W + d + j] = s0[j];
-        G[(c + 1) * W + d + j] = s1[j];
-      }
+  // (d .. d + 3) over the rows in use (the K columns and yc), narrowed where they would
+  // reach only the upper triangle or the padding (`tile`).
+  for (int64_t c = 0; c <= K; c += 2) {
+    const bool pair = c + 1 <= K;
+    const int64_t last = pair ? c + 1 : c;  // the tile's last row
+    for (int64_t d = 0; d <= last; d += 4) {
+      const bool narrow = last - d < 2;  // columns d + 2, d + 3 all above the diagonal
+      if (pair)
+        narrow ? tile<2, 2>(G, rows_, W, block, c, d) : tile<2, 4>(G, rows_, W, block, c, d);
+      else
+        narrow ? tile<1, 2>(G, rows_, W, block, c, d) : tile<1, 4>(G, rows_, W, block, c, d);
     }
   }
   }
