@@ -23,10 +23,12 @@ Per stage: the best wall time of a call in ms (the least disturbed of the rounds
 the median process CPU time of a call (all threads: the fused kernel runs two, so its
 CPU time is up to twice its wall time; CPU time is what another process's load changes
 least), both less the fixed cost of a call (dispatch of a compiled program, `empty`:
-one that returns its argument), then per 1000 fits (calls per fit x 1000 / batch), with
+one that doubles a number per record), then per 1000 fits (calls per fit x 1000 / batch), with
 each stage's share of the whole fit's CPU time. `bookkeeping` is the whole step less
 its stages; `unaccounted` the whole fit less every stage (the batches' loop, the
-results). Per-step stages run at the iterate after 10 steps. Compare runs taken in one
+results). A stage that costs less than that fixed cost (the standard errors, the
+stopping rule: a few operations per record) reads slightly negative: next to nothing.
+Per-step stages run at the iterate after 10 steps. Compare runs taken in one
 sitting. Run it from the repository root with `PYTHONPATH=.` to profile the checkout,
 not an installed copy.
 """
