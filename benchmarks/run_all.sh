@@ -9,6 +9,7 @@ export JAXCASCADE_CACHE=${JAXCASCADE_CACHE:-off}   # compile times reported cold
 
 bench() {  # issue 6: throughput vs NumPy/SciPy and the FLOP floor; scaling
     jaxcascade bench --out results/bench.csv --json > results/bench.json
+    python benchmarks/bench_history.py results/bench.json   # a row in results/bench_history.csv
     jaxcascade bench --backend xla --out results/bench_xla.csv --json > results/bench_xla.json
     python benchmarks/scaling.py --out results/scaling.csv
 }

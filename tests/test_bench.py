@@ -28,8 +28,10 @@ def test_bench_json_is_sane(capsys, tmp_path):
     assert main(["bench", *TINY, *FAST, "--json", "--out", str(out)]) == 0
     figures = json.loads(capsys.readouterr().out)
     assert tuple(figures) == SUMMARY_KEYS
-    for key in SUMMARY_KEYS[:-1]:
+    for key in SUMMARY_KEYS[: SUMMARY_KEYS.index("device")]:
         assert math.isfinite(figures[key]) and figures[key] > 0, key
+    assert figures["floor_count"] == _flops.FLOOR_COUNT
+    assert figures["load"] >= 0
     assert figures["ratio"] == pytest.approx(
         figures["fits_per_s"] / figures["baseline_fits_per_s"], rel=1e-12
     )
@@ -42,8 +44,9 @@ def test_bench_json_is_sane(capsys, tmp_path):
     assert row["dtype"] == "float64"
     assert row["backend"] == ("fused" if _fused.available() else "xla")
     assert (int(row["n"]), int(row["realisations"]), int(row["iterations"])) == (300, 8, 3)
-    flops = _flops.flops_per_fit(Orders(), 300, 3)["total"]
-    assert int(row["flops_per_fit"]) == flops
+    # the floor's count is the standard one, 3 x (2 N P^2 + 2 N P) for 3 iterations
+    assert int(row["flops_per_fit"]) == 3 * (2 * 300 * 12**2 + 2 * 300 * 12)
+    assert int(row["flops_per_fit_detailed"]) == _flops.flops_per_fit(Orders(), 300, 3)["total"]
 
 
 def test_bench_xla_backend_runs(capsys, tmp_path):
@@ -109,3 +112,28 @@ def test_bench_robust_json_keys(capsys):
     assert figures["ratio"] == pytest.approx(
         figures["fits_per_s"] / figures["baseline_fits_per_s"], rel=1e-12
     )
+
+
+def test_bench_history_appends_a_row_per_summary(tmp_path):
+    # results/bench_history.csv: one row per regeneration, the header written once
+    summary = tmp_path / "bench.json"
+    history = tmp_path / "history.csv"
+    figures = {
+        "fits_per_s": 1234.5,
+        "ratio": 40.0,
+        "floor_fraction": 0.3,
+        "compile_s": 1.0,
+        "device": "cpu: some CPU (2 cores)",
+        "floor_count": _flops.FLOOR_COUNT,
+        "load": 1.5,
+    }
+    summary.write_text(json.dumps(figures))
+    command = [sys.executable, str(ROOT / "benchmarks" / "bench_history.py"), str(summary)]
+    for _ in range(2):
+        subprocess.run([*command, "--out", str(history)], check=True, capture_output=True)
+    with open(history) as file:
+        rows = list(csv.DictReader(file))
+    assert len(rows) == 2
+    assert rows[0]["machine"] == figures["device"] and float(rows[0]["fits_per_s"]) == 1234.5
+    assert rows[0]["floor_count"] == _flops.FLOOR_COUNT and float(rows[0]["load"]) == 1.5
+    assert rows[0]["commit"]  # this checkout's HEAD

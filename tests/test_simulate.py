@@ -46,6 +46,29 @@ def test_simulate_matches_oracle(orders):
         assert np.ptp(y) > 0  # the backlash moved
 
 
+@pytest.mark.parametrize("orders", ORDERS[:3], ids=str)
+def test_pwl_equals_its_matrix_form(orders):
+    # pwl sums its segments element-wise in the order of the matrix product it replaced
+    # (`MR @ right + ML @ left`); batched as in a Monte-Carlo run, the two agree to
+    # rounding (on XLA's CPU backend, bit for bit)
+    rng = np.random.default_rng(7)
+    vectors = jnp.asarray(np.stack([oracle.random_system(rng, orders) for _ in range(8)]))
+    u = jnp.asarray(rng.uniform(-2, 2, (8, 400)))
+
+    def matrix_form(vector, u):
+        p = CascadeParams.from_vector(vector, orders)
+        zero = jnp.zeros((1,), u.dtype)
+        DR, DL = jnp.concatenate([zero, p.DR]), jnp.concatenate([zero, p.DL])
+        right = (DR[:, None] - u[None, :] < 0) * (u[None, :] - DR[:, None])
+        left = (u[None, :] - DL[:, None] < 0) * (u[None, :] - DL[:, None])
+        return p.MR @ right + p.ML @ left
+
+    got = jax.jit(jax.vmap(lambda v, u: pwl(CascadeParams.from_vector(v, orders), u)))(vectors, u)
+    want = jax.jit(jax.vmap(matrix_form))(vectors, u)
+    scale = float(jnp.max(jnp.abs(want)))
+    np.testing.assert_allclose(got, want, rtol=0, atol=8 * np.finfo(float).eps * scale)
+
+
 def test_pwl_slopes_are_cumulative():
     # METHOD.md: the slope of right segment k is MR1 + ... + MRk (left likewise).
     orders = Orders(3, 3, 1, 0)

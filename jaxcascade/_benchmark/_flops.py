@@ -76,6 +76,25 @@ def flops_per_fit(orders: Orders | None = None, n: int = 4000, iterations: int =
     return terms
 
 
+# The floor's count, in words (the JSON and CSV state it beside the figure).
+FLOOR_COUNT = "iterations x (2 N P^2 + 2 N P)"
+
+
+def normal_equations_flops(orders: Orders | None = None, n: int = 4000, iterations: int = 20):
+    """The floor's count of a fit: `iterations x (2 N P^2 + 2 N P)`, the normal equations
+    of every step as dense products (`phi^T phi` and `phi^T y`, P = `orders.size`).
+
+    The standard count, independent of this package's algorithm: what a reader computes
+    from the problem's size alone, and what issue 22 holds the benchmark to. It leaves
+    out the simulation, the regressors, the solve and the first step's smaller system,
+    and counts the whole Gram matrix where `flops_per_fit` counts its symmetric half:
+    at the paper's orders it is about 1.3 times `flops_per_fit`'s total, so its floor
+    is the slower, and the fraction of it reached the larger, of the two.
+    """
+    P = (orders or Orders()).size
+    return iterations * (2 * n * P * P + 2 * n * P)
+
+
 def _best_time(function, repeats: int) -> float:
     function()  # warm up (and compile)
     best = np.inf

@@ -12,7 +12,9 @@ runs them all). Three figures come from one run on the same machine:
   CPU kernel (`_fused`), `--backend xla` times the pure-XLA path instead;
 - the NumPy/SciPy baseline (`_baseline`), realisations one after another, on a subset,
   in a separate process with one BLAS thread by default (see `run_baseline_process`);
-- the FLOP floor: flops per fit (`_flops`) over the measured float64 matmul rate.
+- the FLOP floor: flops per fit over the measured float64 matmul rate, with the
+  standard count of the normal equations (`_flops.normal_equations_flops`,
+  `iterations x (2 N P^2 + 2 N P)`, stated in the JSON as `floor_count`).
 
 Peak memory is the peak resident set size of the process after the batched run (before
 the baseline and the matmul measurement, which would otherwise set it). XLA allocates
@@ -48,6 +50,8 @@ SUMMARY_KEYS = (
     "compile_s",
     "peak_mem_mb",
     "device",
+    "floor_count",
+    "load",
 )
 
 
@@ -150,6 +154,9 @@ def run_jax(
     fit, backend = batched_fit(example_number, n, iterations, dtype, backend=backend, batch=batch)
     compiled = fit.lower(keys, params).compile()
     compile_s = time.perf_counter() - start
+    # the machine's load (1-minute average) as the timed runs start: on a shared machine
+    # the figures are only comparable at a similar load
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else math.nan
     best = math.inf
     for _ in range(max(repeats, 1)):
         start = time.perf_counter()
@@ -159,6 +166,7 @@ def run_jax(
     return {
         "fits_per_s": realisations / best,
         "run_s": best,
+        "load": load,
         "compile_s": compile_s,
         "kernel_build_s": build_s,
         "peak_mem_mb": peak_rss_mb(),
@@ -212,12 +220,19 @@ def run_baseline_process(
 
 
 def run_floor(n: int, iterations: int, example_number=1, matmul_size=2048, repeats=3):
-    """Flops per fit, the matmul rate and the floor in fits per second."""
-    flops = _flops.flops_per_fit(get_example(example_number).orders, n, iterations)["total"]
+    """Flops per fit, the matmul rate and the floor in fits per second.
+
+    The floor counts `_flops.FLOOR_COUNT` (`normal_equations_flops`: the standard count
+    of the normal equations, issue 22's); `flops_per_fit_detailed` is `flops_per_fit`'s
+    term-by-term count of this workload, for reference."""
+    orders = get_example(example_number).orders
+    flops = _flops.normal_equations_flops(orders, n, iterations)
     rates = _flops.matmul_rates(matmul_size, repeats)
     backend, rate = _flops.machine_rate(rates)
     return {
         "flops_per_fit": flops,
+        "floor_count": _flops.FLOOR_COUNT,
+        "flops_per_fit_detailed": _flops.flops_per_fit(orders, n, iterations)["total"],
         "matmul_gflops": rate / 1e9,
         "matmul_backend": backend,
         "matmul_size": matmul_size,

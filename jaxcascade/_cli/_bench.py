@@ -24,10 +24,12 @@ def _report(r: dict) -> str:
             f"({r['baseline_realisations']} realisations in {r['baseline_s']:.2f} s, "
             f"{r['baseline_threads']} BLAS thread(s))",
             f"ratio to baseline: {r['ratio']:.1f}",
-            f"floor: {r['flops_per_fit'] / 1e6:.2f} MFlop per fit at {r['matmul_gflops']:.1f} "
+            f"floor: {r['flops_per_fit'] / 1e6:.2f} MFlop per fit ({r['floor_count']}) at "
+            f"{r['matmul_gflops']:.1f} "
             f"GFlop/s ({r['matmul_backend']} float64 matmul, {r['matmul_size']}^3) = "
             f"{r['floor_fits_per_s']:.0f} fits/s; fraction reached {r['floor_fraction']:.3f}",
             f"peak memory: {r['peak_mem_mb']:.0f} MB (peak RSS after the batched run)",
+            f"load average as the timed runs started: {r['load']:.2f}",
         ]
     )
 

@@ -113,15 +113,56 @@ def voros_step(params: CascadeParams, u, y, backend: str = "xla"):
         reg = step_regression(params, u, y)
         theta, singular, _, inverse = solve_step(from_regression(reg, o), n)
         cost = jnp.mean((reg.yc - reg.phi @ theta) ** 2)
-    variance = cost * n / max(n - o.size, 1)
-    standard_errors = jnp.sqrt(jnp.maximum(variance * inverse, 0.0))
     new = CascadeParams.from_theta(theta, o, check=False)
-    return new.to_vector(), singular, cost, standard_errors
+    return new.to_vector(), singular, cost, standard_errors(cost, inverse, n, o.size)
+
+
+def standard_errors(cost, inverse_diagonal, n: int, size: int):
+    """Least-squares standard errors `sqrt(J N / (N - P) diag((phi^T phi)^-1))` of a step
+    (`voros_step`) from its cost J and the inverse Gram matrix's diagonal."""
+    variance = cost * n / max(n - size, 1)
+    return jnp.sqrt(jnp.maximum(variance * inverse_diagonal, 0.0))
 
 
 def _theta(vectors):
     """`Orders.names` vectors (any leading axes) -> theta (eq. 18): `cR` -> `C = cR mR`."""
     return vectors.at[..., -1].multiply(vectors[..., -2])
+
+
+def stopping_rule(theta_new, theta, se, cost, new_cost, tol, se_tol, cost_tol):
+    """`(converged, tolerance)` of a step theta -> theta_new (eq. 18 order): every
+    parameter's change within `tolerance = se_tol se + tol (1 + |theta_new|)`, or the cost
+    J settled (`voros`, "Stopping")."""
+    tolerance = se_tol * se + tol * (1 + jnp.abs(theta_new))
+    converged = jnp.all(jnp.abs(theta_new - theta) <= tolerance)
+    # the paper's step c: the cost J no longer changes (relative, > 0: a cost at the
+    # rounding floor of the normal equations is clipped to 0 and says nothing)
+    settled = (cost > 0) & (jnp.abs(new_cost - cost) <= cost_tol * cost)
+    return converged | ((cost_tol >= 0) & settled), tolerance
+
+
+def cycle_detection(theta_new, thetas, k, tolerance, cycle_period: int):
+    """`(revisited, tight, spread)`: whether iterate k + 1 (`theta_new`) lies within
+    `tolerance` of iterate k + 1 - j for a period 2 <= j <= `cycle_period` (`thetas`:
+    the iterates so far in eq. 18 order, row i iterate i; row 0, the initial values, is
+    no iterate of the map), whether the cycle's iterates spread over at most
+    `_TIGHT_CYCLE` tolerances in every parameter (an oscillating approach to a fixed
+    point), and that spread (`voros`, "Stopping")."""
+    last = thetas.shape[0] - 1
+    rows = jnp.arange(last + 1)
+    periods = jnp.arange(2, max(cycle_period, 2) + 1)  # 0 or 1: masked below
+    earlier = jnp.clip(k + 1 - periods, 0, last)
+    close = jnp.all(jnp.abs(theta_new - thetas[earlier]) <= tolerance, axis=1)
+    close = close & (k + 1 - periods >= 1) & (cycle_period >= 2)
+    period = jnp.where(jnp.any(close), periods[jnp.argmax(close)], 0)
+    in_cycle = (rows > k + 1 - period) & (rows <= k)
+    spread_max = jnp.max(jnp.where(in_cycle[:, None], thetas, -jnp.inf), axis=0)
+    spread_min = jnp.min(jnp.where(in_cycle[:, None], thetas, jnp.inf), axis=0)
+    spread = jnp.maximum(spread_max, theta_new) - jnp.minimum(spread_min, theta_new)
+    # An iteration that converges while oscillating (an eigenvalue of the map near
+    # -1) also revisits a neighbourhood; its "cycle" spans a few tolerances only.
+    tight = jnp.all(spread <= _TIGHT_CYCLE * tolerance)
+    return jnp.any(close), tight, spread
 
 
 def voros(
@@ -301,28 +342,13 @@ def _voros(
         new_status = classify(new, singular)
         accepted = new_status == _RUNNING
         theta_new = _theta(new)
-        tolerance = se_tol * se + tol * (1 + jnp.abs(theta_new))
-        converged = jnp.all(jnp.abs(theta_new - _theta(vector)) <= tolerance)
-        # the paper's step c: the cost J no longer changes (relative, > 0: a cost at the
-        # rounding floor of the normal equations is clipped to 0 and says nothing)
-        settled = (cost > 0) & (jnp.abs(new_cost - cost) <= cost_tol * cost)
-        converged = converged | ((cost_tol >= 0) & settled)
-        # Iterate k + 1 against iterates k + 1 - j, j = 2..cycle_period (row 0, the
-        # initial values, is no iterate of the map).
-        periods = jnp.arange(2, max(cycle_period, 2) + 1)  # 0 or 1: masked below
-        earlier = jnp.clip(k + 1 - periods, 0, max_iterations)
-        close = jnp.all(jnp.abs(theta_new - _theta(history[earlier])) <= tolerance, axis=1)
-        close = close & (k + 1 - periods >= 1) & (cycle_period >= 2)
-        period = jnp.where(jnp.any(close), periods[jnp.argmax(close)], 0)
-        in_cycle = (rows > k + 1 - period) & (rows <= k)
-        cycle = _theta(history)
-        spread_max = jnp.max(jnp.where(in_cycle[:, None], cycle, -jnp.inf), axis=0)
-        spread_min = jnp.min(jnp.where(in_cycle[:, None], cycle, jnp.inf), axis=0)
-        spread = jnp.maximum(spread_max, theta_new) - jnp.minimum(spread_min, theta_new)
-        # An iteration that converges while oscillating (an eigenvalue of the map near
-        # -1) also revisits a neighbourhood; its "cycle" spans a few tolerances only.
-        tight = jnp.all(spread <= _TIGHT_CYCLE * tolerance)
-        revisited = ~converged & jnp.any(close)
+        converged, tolerance = stopping_rule(
+            theta_new, _theta(vector), se, cost, new_cost, tol, se_tol, cost_tol
+        )
+        revisited, tight, spread = cycle_detection(
+            theta_new, _theta(history), k, tolerance, cycle_period
+        )
+        revisited = ~converged & revisited
         converged = converged | (revisited & tight)
         cycled = revisited & ~tight
         new_status = jnp.where(accepted & converged, Status.converged, new_status)

@@ -4,8 +4,8 @@
 // internal signals v (eq. 1) and x (eq. 6), the switching variables g1, g2 (eqs. 10-11),
 // the corrected output yc (eq. 25) and the regressors phi (eq. 17), and accumulates the
 // two diagonal blocks of the Gram matrix phi^T phi, the right-hand sides phi^T yc and
-// yc^T yc, without ever storing phi. Four records share one pass, one per SIMD lane,
-// and the batch is split over threads.
+// yc^T yc, without ever storing phi. `kLanes` records (4 or 8) share one pass, one per
+// SIMD lane, and the batch is split over threads.
 //
 // Block 1 holds the NS and LD columns and the cL column (all carry g1); block 2 the mR
 // and C columns (they carry g2); g1 g2 = 0, so the blocks are all of phi^T phi.
@@ -25,20 +25,31 @@ namespace ffi = xla::ffi;
 
 namespace {
 
-typedef double v4 __attribute__((vector_size(32)));
+// One record per SIMD lane: 8 with AVX-512 (the same arithmetic per record, in twice the
+// lanes: twice the Gram updates per instruction where the cores have 512-bit units), 4
+// with AVX2 or less (GCC splits a wider vector into what the target has).
+#if defined(__AVX512F__)
+constexpr int kLanes = 8;
+#else
 constexpr int kLanes = 4;
+#endif
+typedef double vd __attribute__((vector_size(8 * kLanes)));
 constexpr int kMaxColumns = 64;  // block-1 columns; the Python side checks the orders
 constexpr int kMaxLag = 16;      // r and p
 constexpr int64_t kBlock = 32;   // samples buffered per register-tiled Gram update
 constexpr int64_t kMaxWidth = (kMaxColumns + 1 + 3) / 4 * 4;
 
-typedef long long m4 __attribute__((vector_size(32)));  // lane masks: all ones or zero
+typedef long long vm __attribute__((vector_size(8 * kLanes)));  // lane masks: all ones or 0
 
-inline v4 splat(double a) { return v4{a, a, a, a}; }
+inline vd splat(double a) {
+  vd out;
+  for (int l = 0; l < kLanes; ++l) out[l] = a;
+  return out;
+}
 // Where s < 0: the paper's h (eq. 4) as a lane mask.
-inline m4 negative(v4 s) { return s < splat(0.0); }
+inline vm negative(vd s) { return s < splat(0.0); }
 // x where the mask is set, else 0 (the product of x with h, exactly, up to the sign of 0).
-inline v4 keep(m4 mask, v4 x) { return (v4)(mask & (m4)x); }
+inline vd keep(vm mask, vd x) { return (vd)(mask & (vm)x); }
 
 // Model orders, known at compile time (`Fixed`, so that every loop over columns unrolls
 // and the regressors live in registers) or at run time (`Dynamic`).
@@ -52,42 +63,70 @@ struct Dynamic {
 template <class O>
 int64_t size(const O& o) { return o.nR + o.nR - 1 + o.nL + o.nL - 1 + (o.r - 1) + o.p + 3; }
 
-// Records [b0, b0 + 4) of the batch (indices past the end repeat the last record).
-// `scratch` holds u and y of the four records, interleaved by lane (2 n vectors), then
+// Adds `block` buffered rows into the Gram tile of rows c .. c + Rows - 1 and columns
+// d .. d + Cols - 1, its sums held in registers over the block. Every entry is summed over
+// the samples in the same order whatever the tile's shape.
+template <int Rows, int Cols>
+inline void tile(vd* G, const vd* rows_, int64_t W, int64_t block, int64_t c, int64_t d) {
+  vd s[Rows][Cols];
+  for (int i = 0; i < Rows; ++i)
+    for (int j = 0; j < Cols; ++j) s[i][j] = G[(c + i) * W + d + j];
+  for (int64_t k = 0; k < block; ++k) {
+    const vd* row = rows_ + k * W;
+    for (int i = 0; i < Rows; ++i) {
+      const vd x = row[c + i];
+      for (int j = 0; j < Cols; ++j) s[i][j] += x * row[d + j];
+    }
+  }
+  for (int i = 0; i < Rows; ++i)
+    for (int j = 0; j < Cols; ++j) G[(c + i) * W + d + j] = s[i][j];
+}
+
+// Records [b0, b0 + kLanes) of the batch (indices past the end repeat the last record).
+// `scratch` holds u and y of these records, interleaved by lane (2 n vectors), then
 // the Gram matrix and the row buffer of block 1 (`scratch_size`).
 template <bool First, class O>
 void group(const double* u, const double* y, const double* params, int64_t batch, int64_t n,
-           const O o, int64_t b0, v4* scratch, double* gram1, double* rhs1, double* gram2,
+           const O o, int64_t b0, vd* scratch, double* gram1, double* rhs1, double* gram2,
            double* rhs2, double* ycc) {
   const int64_t P = size(o), K = P - 2;
   int64_t rows[kLanes];
   for (int l = 0; l < kLanes; ++l) rows[l] = std::min(b0 + l, batch - 1);
-  v4* us = scratch;
-  v4* ys = scratch + n;
+  vd* us = scratch;
+  vd* ys = scratch + n;
+  // Interleaved sample by sample (each vector written whole, once), not lane by lane
+  // (every lane's pass would touch every vector of `us` and `ys` again).
+  const double* ur[kLanes];
+  const double* yr[kLanes];
   for (int l = 0; l < kLanes; ++l) {
-    const double* ur = u + rows[l] * n;
-    const double* yr = y + rows[l] * n;
-    for (int64_t t = 0; t < n; ++t) {
-      us[t][l] = ur[t];
-      ys[t][l] = yr[t];
+    ur[l] = u + rows[l] * n;
+    yr[l] = y + rows[l] * n;
+  }
+  for (int64_t t = 0; t < n; ++t) {
+    vd ut, yt;
+    for (int l = 0; l < kLanes; ++l) {
+      ut[l] = ur[l][t];
+      yt[l] = yr[l][t];
     }
+    us[t] = ut;
+    ys[t] = yt;
   }
   // Parameters, one vector per parameter (lane = record).
-  v4 theta[kMaxColumns + 3];
+  vd theta[kMaxColumns + 3];
   for (int64_t i = 0; i < P; ++i)
     for (int l = 0; l < kLanes; ++l) theta[i][l] = params[rows[l] * P + i];
-  const v4* MR = theta;
-  const v4* DR = MR + o.nR;
-  const v4* ML = DR + (o.nR - 1);
-  const v4* DL = ML + o.nL;
-  const v4* a = DL + (o.nL - 1);
-  const v4* b = a + (o.r - 1);
-  const v4 one = splat(1.0), zero = splat(0.0);
-  const v4 cL = theta[P - 3], mR = theta[P - 2], cR = theta[P - 1];
+  const vd* MR = theta;
+  const vd* DR = MR + o.nR;
+  const vd* ML = DR + (o.nR - 1);
+  const vd* DL = ML + o.nL;
+  const vd* a = DL + (o.nL - 1);
+  const vd* b = a + (o.r - 1);
+  const vd one = splat(1.0), zero = splat(0.0);
+  const vd cL = theta[P - 3], mR = theta[P - 2], cR = theta[P - 1];
   // h(n / mR) = h(n * (1 / mR)): same sign, without a division per sample.
-  const v4 mRcR = mR * cR, inv_mR = one / mR;
+  const vd mRcR = mR * cR, inv_mR = one / mR;
   // Breakpoint-column values -M (eq. 17), unit slopes in the first iteration.
-  v4 minus_MR[kMaxColumns], minus_ML[kMaxColumns];
+  vd minus_MR[kMaxColumns], minus_ML[kMaxColumns];
   for (int64_t i = 0; i < o.nR; ++i) minus_MR[i] = First ? -one : -MR[i];
   for (int64_t j = 0; j < o.nL; ++j) minus_ML[j] = First ? -one : -ML[j];
 
@@ -96,20 +135,20 @@ void group(const double* u, const double* y, const double* params, int64_t batch
   // Rows are buffered `kBlock` samples at a time, then added in 2 x 4 register tiles,
   // each tile's eight sums kept in registers over the block (a small syrk).
   const int64_t W = (K + 1 + 3) / 4 * 4;
-  v4* G = scratch + 2 * n;        // W x W, lower part used
-  v4* rows_ = G + W * W;          // kBlock x W
+  vd* G = scratch + 2 * n;        // W x W, lower part used
+  vd* rows_ = G + W * W;          // kBlock x W
   for (int64_t i = 0; i < W * W; ++i) G[i] = zero;
   for (int64_t i = 0; i < kBlock * W; ++i) rows_[i] = zero;
-  v4 G2[3] = {}, r2[2] = {};
-  v4 v_past[kMaxLag] = {}, x_past[kMaxLag] = {};  // v(t-1), v(t-2), ...; x(t-1), ...
-  v4 u_prev = zero, y_prev = zero;
+  vd G2[3] = {}, r2[2] = {};
+  vd v_past[kMaxLag] = {}, x_past[kMaxLag] = {};  // v(t-1), v(t-2), ...; x(t-1), ...
+  vd u_prev = zero, y_prev = zero;
 
   for (int64_t t0 = 0; t0 < n; t0 += kBlock) {
   const int64_t block = std::min<int64_t>(kBlock, n - t0);
   for (int64_t t = t0; t < t0 + block; ++t) {
-    v4* phi = rows_ + (t - t0) * W;
-    const v4 u_t = us[t], y_t = ys[t];
-    v4 x_t;
+    vd* phi = rows_ + (t - t0) * W;
+    const vd u_t = us[t], y_t = ys[t];
+    vd x_t;
     if (First) {
       x_t = y_t;
     } else {  // eq. 6 with a1 = 1
@@ -118,13 +157,13 @@ void group(const double* u, const double* y, const double* params, int64_t batch
       for (int64_t j = 0; j < o.p; ++j) x_t -= b[j] * x_past[j];
     }
     // eqs. 10-11 with mL = 1; the left line wins where both hold.
-    const m4 g1 = negative(x_t + cL - y_prev);
-    const m4 g2 = negative((y_prev - mR * x_t + mRcR) * inv_mR) & ~g1;
-    const v4 yc = y_t - keep(~(g1 | g2), y_prev);  // eq. 25
+    const vm g1 = negative(x_t + cL - y_prev);
+    const vm g2 = negative((y_prev - mR * x_t + mRcR) * inv_mR) & ~g1;
+    const vd yc = y_t - keep(~(g1 | g2), y_prev);  // eq. 25
     // eq. 17, NS and LD columns, with u1 = u(t-1), all carrying g1.
-    const v4 u1 = u_prev;
+    const vd u1 = u_prev;
     int64_t k = 0;
-    m4 right[kMaxColumns], left[kMaxColumns];  // h(DR_i - u1), h(u1 - DL_j), with g1
+    vm right[kMaxColumns], left[kMaxColumns];  // h(DR_i - u1), h(u1 - DL_j), with g1
     for (int64_t i = 0; i < o.nR; ++i) right[i] = negative((i == 0 ? zero : DR[i - 1]) - u1) & g1;
     for (int64_t j = 0; j < o.nL; ++j) left[j] = negative(u1 - (j == 0 ? zero : DL[j - 1])) & g1;
     for (int64_t i = 0; i < o.nR; ++i) phi[k++] = keep(right[i], u1);
@@ -136,25 +175,25 @@ void group(const double* u, const double* y, const double* params, int64_t batch
     phi[K - 1] = keep(g1, one);
     phi[K] = yc;
     // Block 2: columns x g2 and -g2.
-    const v4 q0 = keep(g2, x_t), q1 = keep(g2, -one);
+    const vd q0 = keep(g2, x_t), q1 = keep(g2, -one);
     G2[0] += q0 * q0;
     G2[1] += q1 * q0;
     G2[2] += q1 * q1;
     r2[0] += q0 * yc;
     r2[1] += q1 * yc;
     // Advance the signals: v(t) = NS(u(t)) (eq. 1), or u(t) in the first iteration.
-    v4 v_t;
+    vd v_t;
     if (First) {
       v_t = u_t;
     } else {
       // eq. 1: h(D - u)(u - D) = max(u - D, 0) on the right, min(u - D, 0) on the left
       v_t = zero;
       for (int64_t i = 0; i < o.nR; ++i) {
-        const v4 d = u_t - (i == 0 ? zero : DR[i - 1]);
+        const vd d = u_t - (i == 0 ? zero : DR[i - 1]);
         v_t += MR[i] * keep(negative(-d), d);
       }
       for (int64_t j = 0; j < o.nL; ++j) {
-        const v4 d = u_t - (j == 0 ? zero : DL[j - 1]);
+        const vd d = u_t - (j == 0 ? zero : DL[j - 1]);
         v_t += ML[j] * keep(negative(d), d);
       }
     }
@@ -166,26 +205,17 @@ void group(const double* u, const double* y, const double* params, int64_t batch
     y_prev = y_t;
   }
   // The block's rows into the Gram matrix: tiles of rows (c, c + 1) x columns
-  // (d .. d + 3), for every tile that reaches the lower triangle.
-  for (int64_t c = 0; c < W; c += 2) {
-    for (int64_t d = 0; d <= c + 1 && d < W; d += 4) {
-      v4 s0[4], s1[4];
-      for (int j = 0; j < 4; ++j) {
-        s0[j] = G[c * W + d + j];
-        s1[j] = G[(c + 1) * W + d + j];
-      }
-      for (int64_t k = 0; k < block; ++k) {
-        const v4* row = rows_ + k * W;
-        const v4 x0 = row[c], x1 = row[c + 1];
-        for (int j = 0; j < 4; ++j) {
-          s0[j] += x0 * row[d + j];
-          s1[j] += x1 * row[d + j];
-        }
-      }
-      for (int j = 0; j < 4; ++j) {
-        G[c * W + d + j] = s0[j];
-        G[(c + 1) * W + d + j] = s1[j];
-      }
+  // (d .. d + 3) over the rows in use (the K columns and yc), narrowed where they would
+  // reach only the upper triangle or the padding (`tile`).
+  for (int64_t c = 0; c <= K; c += 2) {
+    const bool pair = c + 1 <= K;
+    const int64_t last = pair ? c + 1 : c;  // the tile's last row
+    for (int64_t d = 0; d <= last; d += 4) {
+      const bool narrow = last - d < 2;  // columns d + 2, d + 3 all above the diagonal
+      if (pair)
+        narrow ? tile<2, 2>(G, rows_, W, block, c, d) : tile<2, 4>(G, rows_, W, block, c, d);
+      else
+        narrow ? tile<1, 2>(G, rows_, W, block, c, d) : tile<1, 4>(G, rows_, W, block, c, d);
     }
   }
   }
@@ -212,7 +242,7 @@ void group(const double* u, const double* y, const double* params, int64_t batch
 // straight-line code; any other orders run the same code with run-time loop bounds.
 template <bool First>
 void dispatch(const double* u, const double* y, const double* params, int64_t batch,
-              int64_t n, const Dynamic& o, int64_t b0, v4* scratch, double* gram1,
+              int64_t n, const Dynamic& o, int64_t b0, vd* scratch, double* gram1,
               double* rhs1, double* gram2, double* rhs2, double* ycc) {
   if (o.nR == 2 && o.nL == 2 && o.r == 2 && o.p == 2)
     group<First>(u, y, params, batch, n, Fixed<2, 2, 2, 2>{}, b0, scratch, gram1, rhs1, gram2,
@@ -281,7 +311,7 @@ ffi::Error NormalEquationsImpl(ffi::Buffer<ffi::F64> u, ffi::Buffer<ffi::F64> y,
   const int64_t groups = (batch + kLanes - 1) / kLanes;
   const int64_t threads = thread_count(groups);
   auto work = [&](int64_t worker) {
-    std::vector<v4> scratch(2 * n + kMaxWidth * kMaxWidth + kBlock * kMaxWidth);
+    std::vector<vd> scratch(2 * n + kMaxWidth * kMaxWidth + kBlock * kMaxWidth);
     for (int64_t g = worker; g < groups; g += threads) {
       auto run = first ? dispatch<true> : dispatch<false>;
       run(u.typed_data(), y.typed_data(), params.typed_data(), batch, n, o, g * kLanes,

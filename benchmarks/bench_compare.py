@@ -1,0 +1,157 @@
+"""The throughput-regression guard: this checkout's `jaxcascade bench` against a reference,
+alternated in fresh processes on the same machine.
+
+    python benchmarks/bench_compare.py REF [--runs 5] [-- BENCH ARGUMENTS]
+    python benchmarks/bench_compare.py --installed [--runs 5] [-- BENCH ARGUMENTS]
+
+`REF` is a commit (anything `git rev-parse` reads: `main`, `51babbd`, `HEAD~3`); it is
+checked out into a temporary `git worktree` (removed afterwards), and its bench runs
+from that worktree's root, so it imports its own copy of the package. `--installed`
+compares with the installed package instead (run from a temporary folder, so that the
+import finds the installed copy, not this checkout). This checkout's bench runs from its
+root with `PYTHONPATH` set to it. Each of `--runs` rounds runs both, `python -m
+jaxcascade bench --json` plus the BENCH ARGUMENTS (default: the bench's own workload),
+each in a fresh process, alternating which goes first (A B, B A, ...) so that a drift
+in the machine's load touches both alike.
+
+Prints each run's fits/s, compile seconds and load average, then the ratio of this
+checkout's fits/s to the reference's, pair by pair: min / median / max. On a machine
+shared with other work, quote the median with its spread, never one run. `--json`
+prints the same as JSON. Exit code 0 unless a bench failed (2).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import pathlib
+import statistics
+import subprocess
+import sys
+import tempfile
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+
+
+def run_bench(folder: pathlib.Path, pythonpath: str | None, arguments: list[str]) -> dict:
+    """One `python -m jaxcascade bench --json` in a fresh process from `folder`."""
+    env = dict(os.environ)
+    env.pop("PYTHONPATH", None)
+    if pythonpath:
+        env["PYTHONPATH"] = pythonpath
+    done = subprocess.run(
+        [sys.executable, "-m", "jaxcascade", "bench", "--json", *arguments],
+        cwd=folder,
+        env=env,
+        capture_output=True,
+        text=True,
+    )
+    if done.returncode != 0:
+        raise RuntimeError(f"the bench in {folder} failed: {done.stderr.strip()[-1000:]}")
+    record = json.loads(done.stdout.strip().splitlines()[-1])
+    record.setdefault("load", os.getloadavg()[0])  # a reference without the field
+    return record
+
+
+def describe(folder: pathlib.Path) -> str:
+    done = subprocess.run(
+        ["git", "log", "-1", "--format=%h %s"], cwd=folder, capture_output=True, text=True
+    )
+    return done.stdout.strip()[:72] if done.returncode == 0 else str(folder)
+
+
+def main(argv=None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    bench_arguments = []
+    if "--" in argv:
+        at = argv.index("--")
+        argv, bench_arguments = argv[:at], argv[at + 1 :]
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("ref", nargs="?", help="a commit to compare with")
+    parser.add_argument(
+        "--installed", action="store_true", help="compare with the installed package"
+    )
+    parser.add_argument("--runs", type=int, default=5, help="rounds, each runs both (5)")
+    parser.add_argument("--json", action="store_true", help="print the figures as JSON")
+    args = parser.parse_args(argv)
+    if (args.ref is None) == (not args.installed):
+        parser.error("give either REF or --installed")
+    if args.runs < 1:
+        parser.error("--runs must be at least 1")
+
+    with tempfile.TemporaryDirectory(prefix="bench_compare_") as scratch:
+        scratch = pathlib.Path(scratch)
+        if args.installed:
+            reference, reference_path, label = scratch, None, "installed package"
+        else:
+            reference = scratch / "reference"
+            added = subprocess.run(
+                ["git", "worktree", "add", "--detach", str(reference), args.ref],
+                cwd=ROOT,
+                capture_output=True,
+                text=True,
+            )
+            if added.returncode != 0:
+                print(f"bench_compare: cannot check out {args.ref}: {added.stderr.strip()}")
+                return 2
+            reference_path, label = str(reference), describe(reference)
+        try:
+            pairs = []
+            for round_ in range(args.runs):
+                order = ["this", "reference"] if round_ % 2 == 0 else ["reference", "this"]
+                figures = {}
+                for which in order:
+                    if which == "this":
+                        figures[which] = run_bench(ROOT, str(ROOT), bench_arguments)
+                    else:
+                        figures[which] = run_bench(reference, reference_path, bench_arguments)
+                pairs.append(figures)
+                if not args.json:
+                    this, ref = figures["this"], figures["reference"]
+                    print(
+                        f"round {round_ + 1}: this {this['fits_per_s']:.0f} fits/s (compile "
+                        f"{this['compile_s']:.1f} s, load {this['load']:.2f}), reference "
+                        f"{ref['fits_per_s']:.0f} fits/s (compile {ref['compile_s']:.1f} s, "
+                        f"load {ref['load']:.2f}), ratio "
+                        f"{this['fits_per_s'] / ref['fits_per_s']:.3f}",
+                        flush=True,
+                    )
+        except RuntimeError as error:
+            print(f"bench_compare: {error}")
+            return 2
+        finally:
+            if not args.installed:
+                subprocess.run(
+                    ["git", "worktree", "remove", "--force", str(reference)],
+                    cwd=ROOT,
+                    capture_output=True,
+                )
+    ratios = [p["this"]["fits_per_s"] / p["reference"]["fits_per_s"] for p in pairs]
+    summary = {
+        "this": describe(ROOT),
+        "reference": label,
+        "runs": args.runs,
+        "bench_arguments": bench_arguments,
+        "ratio_min": min(ratios),
+        "ratio_median": statistics.median(ratios),
+        "ratio_max": max(ratios),
+        "this_fits_per_s": [p["this"]["fits_per_s"] for p in pairs],
+        "reference_fits_per_s": [p["reference"]["fits_per_s"] for p in pairs],
+        "load": [p["this"]["load"] for p in pairs] + [p["reference"]["load"] for p in pairs],
+        "device": pairs[0]["this"]["device"],
+    }
+    if args.json:
+        print(json.dumps(summary, indent=2))
+    else:
+        print(
+            f"this ({summary['this']}) / reference ({label}): ratio of fits/s "
+            f"{summary['ratio_median']:.3f} (median of {args.runs} pairs; min "
+            f"{summary['ratio_min']:.3f}, max {summary['ratio_max']:.3f}); "
+            f"{summary['device']}; load {min(summary['load']):.1f}-{max(summary['load']):.1f}"
+        )
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
