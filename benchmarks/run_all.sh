@@ -53,9 +53,8 @@ efficiency() {  # issue 13: literal and robust against the Cramer-Rao bound
 loop() {  # issue 5: undeclared effects, and the measured friction-damper records
     python benchmarks/effects_loop.py --out results/effects_loop
     python benchmarks/brfd.py --data "${BRFD_DATA:-../shared/data/brfd}" --out results/brfd --decimate 16 \
-        --max-effects 1 --only harmonics+ --effects backlash_friction,slack_friction,prandtl_ishlinskii,dahl_friction,colored_noise
-    python benchmarks/brfd.py --data "${BRFD_DATA:-../shared/data/brfd}" --out results/brfd_harmonics --decimate 16 \
-        --max-effects 1 --only harmonics_to --effects backlash_friction,slack_friction,prandtl_ishlinskii,dahl_friction,colored_noise
+        --init-samples 50 --max-effects 2 --all-records \
+        --effects backlash_friction,backlash_friction_contacts,slack_friction,prandtl_ishlinskii,dahl_friction,output_offset,colored_noise
 }
 reproduce() {  # issue 2: the paper's examples
     for ex in 1 2; do for snr in 25 inf; do for est in literal robust; do
