@@ -566,7 +566,8 @@ def model_error_loop(
         candidates += round_candidates
         deterministic = [c for c in round_candidates if c.significant and c.name != ARNoise.name]
         if deterministic:
-            chosen = min(deterministic, key=lambda c: (not c.signature_match, c.error))
+            # the residual's signature ranks first only where it can be trusted (above)
+            chosen = min(deterministic, key=lambda c: (trusted and not c.signature_match, c.error))
         else:
             # A coloured residual inflates the variance of its cross-correlation with the
             # input, so the input tests are judged on the whitened residual.
