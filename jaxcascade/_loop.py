@@ -544,17 +544,7 @@ def model_error_loop(
         # the wrong one, not only incomplete): tried where it would be added.
         replacing = [n for n in tried if model.cascade and n in REPLACEMENTS]
         # what every candidate of this round is fitted and judged against
-        # A model worse than the mean of the output is no baseline: the effects are then
-        # judged against the mean (NRMSE 1), whatever local minimum the current model's
-        # fit reached (the noise model, which changes no output, against the model).
-        reference = current
-        if not trusted:
-            scored_y = y_val_np[int(init_samples) :]
-            reference = dataclasses.replace(
-                current, residual=scored_y - np.mean(scored_y), error=1.0
-            )
-        fit_against = (model, reference, failed, round_, us, ys, records, assess)
-        noise_against = (model, current, failed, round_, us, ys, records, assess)
+        fit_against = (model, current, failed, round_, us, ys, records, assess)
         judged_by = {"t_threshold": t_threshold, "min_gain": min_gain}
         for name, action in [(n, "add") for n in tried] + [(n, "replace") for n in replacing]:
             c = _candidate(name, *fit_against, **judged_by, action=action)
@@ -567,7 +557,7 @@ def model_error_loop(
                 f"{'significant' if c.significant else ''}"
             )
         if ARNoise.name in names and ARNoise.name not in added:
-            c = _noise_candidate(*noise_against, **judged_by, noise_alpha=noise_alpha)
+            c = _noise_candidate(*fit_against, **judged_by, noise_alpha=noise_alpha)
             round_candidates.append(c)
             say(
                 f"  {c.label:<24} prediction error {c.evaluation.prediction_error:.4g}  "
