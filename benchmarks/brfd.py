@@ -62,6 +62,17 @@ def harmonic_files(data: pathlib.Path, tension: int | None = 30) -> list[pathlib
     return [data / "characterization" / name for name in chosen]
 
 
+def load(path, decimate: int):
+    """`(u, y)` of a damper record (displacement in, force in kip) at `decimate`, NumPy."""
+    import numpy as np
+
+    from jaxcascade._data import read_record
+
+    options = dict(time_column="time_s", decimate=decimate, scaling="none")
+    r = read_record(path, "displacement_in", "force_kip", **options)
+    return np.asarray(r.u, float), np.asarray(r.y, float)
+
+
 def runs(data: pathlib.Path, args):
     """`(name, estimation files, validation, tests, decimate, extra argv)` of each run."""
     harmonics = harmonic_files(data)
@@ -172,7 +183,6 @@ def main(argv=None) -> int:
         help="NAME,NAME: effects the loop considers (jaxcascade loop --effects; default all)",
     )
     args = parser.parse_args(argv)
-
 
     data, out = pathlib.Path(args.data), pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

@@ -48,9 +48,8 @@ def main(argv=None) -> int:
     import numpy as np
 
     sys.path.insert(0, str(pathlib.Path(__file__).parent))
-    from brfd import FILES, WINDOWS, harmonic_files
+    from brfd import FILES, WINDOWS, harmonic_files, load
 
-    from jaxcascade._data import read_record
     from jaxcascade._effects import EFFECTS
     from jaxcascade._hysteresis import backlash_friction, backlash_friction_start
     from jaxcascade._metrics import score
@@ -75,14 +74,8 @@ def main(argv=None) -> int:
         return cls(*z)
 
     data = pathlib.Path(args.data)
-    options = dict(time_column="time_s", decimate=args.decimate, scaling="none")
-
-    def load(path):
-        r = read_record(path, "displacement_in", "force_kip", **options)
-        return np.asarray(r.u, float), np.asarray(r.y, float)
-
-    harmonics = [load(p) for p in harmonic_files(data)]
-    quakes = {name: load(data / file) for name, file in FILES.items()}
+    harmonics = [load(p, args.decimate) for p in harmonic_files(data)]
+    quakes = {name: load(data / file, args.decimate) for name, file in FILES.items()}
     lines = [
         "| effect | estimation | validation | window NRMSE | NRMSE | seconds | fitted |",
         "|---|---|---|---|---|---|---|",

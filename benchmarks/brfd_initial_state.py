@@ -35,26 +35,18 @@ def main(argv=None) -> int:
 
     jax.config.update("jax_enable_x64", True)
     import jax.numpy as jnp
-    import numpy as np
 
     sys.path.insert(0, str(pathlib.Path(__file__).parent))
-    from brfd import FILES, WINDOWS, harmonic_files
+    from brfd import FILES, WINDOWS, harmonic_files, load
 
-    from jaxcascade._data import read_record
     from jaxcascade._effects import EFFECTS, ExtendedModel
     from jaxcascade._initial_state import scored
     from jaxcascade._model import CascadeParams, Orders
     from jaxcascade._noise import ARNoise
 
     data = pathlib.Path(args.data)
-    options = dict(time_column="time_s", decimate=args.decimate, scaling="none")
-
-    def load(path):
-        r = read_record(path, "displacement_in", "force_kip", **options)
-        return np.asarray(r.u, float), np.asarray(r.y, float)
-
-    harmonics = [load(p) for p in harmonic_files(data)]
-    quakes = {name: load(data / file) for name, file in FILES.items()}
+    harmonics = [load(p, args.decimate) for p in harmonic_files(data)]
+    quakes = {name: load(data / file, args.decimate) for name, file in FILES.items()}
     zero = {"MR1": 0.0, "ML1": 0.0, "cL": 0.0, "mR": 1.0, "cR": 0.0}
     cascade = CascadeParams.from_dict(zero, Orders(1, 1, 1, 0))
     cls = EFFECTS[args.effect]

@@ -47,7 +47,7 @@ import numpy as np
 from jax.flatten_util import ravel_pytree
 from jaxtyping import Array, Float
 
-from ._compile import bucket_length, jit
+from ._compile import jit, pad
 from ._effects._base import EffectState, ExtendedModel, recent
 from ._estimator._refine import least_squares
 from ._metrics import score
@@ -319,10 +319,8 @@ def initialise(
         )
     start = min(max(int(start), n), T)
     first = start - n
-    length = bucket_length(T)
-    pad = length - T
-    u_padded = jnp.concatenate([u, jnp.full((pad,), u[-1], u.dtype)])
-    y_padded = jnp.concatenate([y, jnp.full((pad,), y[-1], y.dtype)])
+    u_padded = jnp.asarray(pad(np.asarray(u)))
+    y_padded = jnp.asarray(pad(np.asarray(y)))
     fit = _initialise(
         model,
         u_padded,
