@@ -91,11 +91,21 @@ def jit(function=None, **kwargs):
 # three per program; Linux allows 65,530 per process), until JAX's caches release it.
 # A long host-side loop over records of many lengths (the model-error loop) compiles
 # one program per shape: record lengths are rounded up to a few buckets
-# (`bucket_length`, `pad`), and `release` frees what a finished stage compiled.
+# (`bucket_length`, `pad`), and `release` frees what a finished stage compiled;
+# `bound` frees it only when the programs compiled since the last release, or the
+# process's memory mappings, pass a limit, so that a later stage (the next candidate,
+# the next record) reuses what an earlier one compiled.
 
 _BACKEND_COMPILE = "/jax/core/compile/backend_compile_duration"
 _compiles = 0
 _listening = False
+_released_at = 0
+
+# `bound`'s limits: programs compiled since the last release (a candidate of the loop
+# compiles 20-60, each holding tens of memory mappings on the damper's records), and
+# mappings of the process (a quarter of Linux's default `vm.max_map_count`, 65,530).
+PROGRAMS = 400
+MAPPINGS = 16_000
 
 
 def _count(event: str, duration: float, **kwargs) -> None:
@@ -142,8 +152,32 @@ def release() -> None:
     long host-side loop compiled. Later calls compile again what they need."""
     import gc
 
+    global _released_at
     jax.clear_caches()
     gc.collect()
+    _released_at = compile_count()
+
+
+def mappings() -> int | None:
+    """The process's memory mappings (lines of `/proc/self/maps`), None where the
+    system has no such file."""
+    try:
+        with open("/proc/self/maps", "rb") as maps:
+            return sum(1 for _ in maps)
+    except OSError:
+        return None
+
+
+def bound(programs: int = PROGRAMS, mapped: int = MAPPINGS) -> bool:
+    """`release` when more than `programs` programs were compiled since the last
+    release, or the process holds more than `mapped` memory mappings; True when it
+    released. Called between the stages of a long host-side loop, it keeps what the
+    stages share compiled and the process's programs under a fixed bound."""
+    count = mappings()
+    if compile_count() - _released_at > programs or (count is not None and count > mapped):
+        release()
+        return True
+    return False
 
 
 def pack(us, ys, dtype=None) -> tuple:

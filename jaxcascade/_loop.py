@@ -7,7 +7,15 @@
    the current estimate, and score each on the validation record: its NRMSE, and a
    Diebold-Mariano test that its squared simulation errors are smaller than the
    current model's (`_significance`: Newey-West variance, Andrews' bandwidth), since
-   the two error series are paired and autocorrelated. An effect
+   the two error series are paired and autocorrelated. The test pools every record
+   (`diebold_mariano_records`): the validation record, out of sample, and the
+   estimation records, in sample, each record's differences as squared NRMSE. One
+   validation record of a measured system carries few independent samples (its errors
+   are smooth), and a current model caught in a wrong basin makes its statistic depend
+   on that basin; the estimation records are independent experiments of the same
+   system. An in-sample gain of `p` added parameters that explain nothing is about
+   `sqrt(p) / 2` in the statistic, well under the threshold, and the relative gain is
+   still asked of the validation record alone. An effect
    marked `needs_signature` (the hysteresis effects) is tried only when a test of its
    signature failed: never on a record whose hysteresis test passes. A parallel path
    linear in its weights (`Effect.linear`) is fitted by ridge least squares on the
@@ -37,7 +45,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array
 
-from ._compile import compile_count, pack, pad, release
+from ._compile import bound, compile_count, pack, pad
 from ._diagnose import ResidualTests, regime_from_switches, residual_tests
 from ._effects import (
     EFFECTS,
@@ -57,7 +65,14 @@ from ._initial_state import initialise
 from ._metrics import score
 from ._model import CascadeParams, Orders
 from ._noise import ARNoise
-from ._significance import BANDWIDTH_RULE, TEST_NAME, VARIANCE, Comparison, diebold_mariano
+from ._significance import (
+    BANDWIDTH_RULE,
+    TEST_NAME,
+    VARIANCE,
+    Comparison,
+    diebold_mariano,
+    diebold_mariano_records,
+)
 from ._simulate import backlash_switches
 from ._validate import record
 
@@ -345,6 +360,9 @@ class Candidate:
     evaluation: Evaluation | None = None
     comparison: Comparison | None = None
     action: str = "add"  # or "replace": the effect replaces the cascade
+    # an effect's Diebold-Mariano statistic on the validation record alone (`t` pools it
+    # with the estimation records' in-sample differences); the noise model's `t` is this
+    t_validation: float | None = None
 
     def to_dict(self) -> dict:
         e, c = self.evaluation, self.comparison
@@ -357,6 +375,7 @@ class Candidate:
             "error": self.error,
             "prediction_error": None if e is None else e.prediction_error,
             "t": self.t,
+            "t_validation": self.t if self.t_validation is None else self.t_validation,
             "loss": None if c is None else c.loss,
             "bandwidth": None if c is None else c.bandwidth,
             "p_value": None if c is None else c.p_value,
@@ -407,7 +426,12 @@ class LoopResult:
             "structure_after": self.final.structure(),
             "significance": {
                 "test": TEST_NAME,
-                "statistic": "DM = mean(d) / sqrt(S / N), d = e_current^2 - e_candidate^2",
+                "statistic": (
+                    "DM = sum_r N_r mean(d_r) / sqrt(sum_r N_r S_r), d_r = (e_current^2 -"
+                    " e_candidate^2) / var(y_r), pooled over the validation record and the"
+                    " estimation records (in sample) for an effect; the validation record's"
+                    " prediction error alone for the noise model"
+                ),
                 "variance": VARIANCE,
                 "bandwidth_rule": BANDWIDTH_RULE,
                 "threshold": self.t_threshold,
@@ -469,8 +493,9 @@ def model_error_loop(
     - `orders`: declared orders of the cascade.
     - `base`: a fitted cascade to start from; by default the robust estimator fits one.
     - `t_threshold`, `min_gain`: a candidate is significant when its Diebold-Mariano
-      statistic (`_significance`) exceeds `t_threshold` and it lowers the validation NRMSE
-      by at least `min_gain` (relative): the simulation NRMSE for an effect, the one-step
+      statistic (`_significance`; an effect's pooled over the validation and the
+      estimation records) exceeds `t_threshold` and it lowers the validation NRMSE by at
+      least `min_gain` (relative): the simulation NRMSE for an effect, the one-step
       prediction NRMSE for the noise model.
     - `noise_alpha`: level of the likelihood-ratio test of the noise model against white
       noise on the estimation records (a further condition for it).
@@ -504,7 +529,7 @@ def model_error_loop(
         estimator = Robust() if robust is None else robust
         fitted = estimator(jnp.concatenate(us), jnp.concatenate(ys), orders, key=key)
         base = jax.device_get(fitted.params)
-        release()  # the robust estimator's program is the largest of the loop
+        bound()  # the robust estimator's program is the largest of the loop: past the bound
         if len(us) > 1:
             say("refining it on every estimation record")
             base = refit(plain(base), _no_effect(base), us, ys)[0].params
@@ -545,13 +570,18 @@ def model_error_loop(
         replacing = [n for n in tried if model.cascade and n in REPLACEMENTS]
         # what every candidate of this round is fitted and judged against
         fit_against = (model, current, failed, round_, us, ys, records, assess)
-        judged_by = {"t_threshold": t_threshold, "min_gain": min_gain}
+        judged_by = {
+            "t_threshold": t_threshold,
+            "min_gain": min_gain,
+            "validation_scale": float(np.var(y_val_np[int(init_samples) :])),
+        }
         for name, action in [(n, "add") for n in tried] + [(n, "replace") for n in replacing]:
             c = _candidate(name, *fit_against, **judged_by, action=action)
             round_candidates.append(c)
             # Each candidate compiles programs of its own structure (about a hundred
-            # memory mappings each, measured on the damper): free them at once.
-            release()
+            # memory mappings each, measured on the damper): freed past a bound, so
+            # that a later candidate or loop of the same structure reuses them.
+            bound()
             say(
                 f"  {c.label:<24} error {c.error:.4g}  t {c.t:7.2f}  "
                 f"{'significant' if c.significant else ''}"
@@ -591,9 +621,9 @@ def model_error_loop(
         model, current = chosen.model, chosen.evaluation
         prefix = "replaces the cascade: " if chosen.action == "replace" else "+ "
         steps.append((f"{prefix}{chosen.label}", model, current))
-        # The round's candidates compiled programs of their own structures: free them
-        # (each stays mapped in memory until released).
-        release()
+        # The round's candidates compiled programs of their own structures (each
+        # stays mapped in memory until released): freed past the bound.
+        bound()
     say("standard errors of the final model on the estimation records")
     errors = model_standard_errors(model, us, ys)
     return LoopResult(
@@ -636,7 +666,16 @@ def _candidate(name, model, current, failed, round_, us, ys, records, assess, **
                 best = (fitted, cost, start.label)
         fitted, _, label = best
     evaluation = assess(fitted)
-    comparison = diebold_mariano(current.residual, evaluation.residual, "simulation")
+    # The evidence of every record: the validation record out of sample and the
+    # estimation records in sample, each a squared NRMSE difference (module docstring).
+    validation = diebold_mariano(current.residual, evaluation.residual, "simulation")
+    in_sample = [np.asarray(y) - simulated_output(fitted, u) for u, y in zip(us, ys, strict=True)]
+    comparison = diebold_mariano_records(
+        [current.residual, *(r[2] for r in records)],
+        [evaluation.residual, *in_sample],
+        [options.get("validation_scale", 1.0), *(float(np.var(r[1])) for r in records)],
+        "simulation",
+    )
     gain = 1 - evaluation.error / current.error
     return Candidate(
         round_,
@@ -650,6 +689,7 @@ def _candidate(name, model, current, failed, round_, us, ys, records, assess, **
         evaluation,
         comparison,
         action,
+        validation.statistic,
     )
 
 

@@ -20,6 +20,16 @@ Bartlett kernel with an AR(1) plug-in: `L = floor(1.1447 (a N)^(1/3))`,
 asymptotically standard normal; the one-sided p-value is reported with it. With `L` a
 sizeable fraction of `N` the normal reference is somewhat liberal (Kiefer & Vogelsang
 2005), one reason the loop asks for `DM > 3` and a relative gain, not `p < 0.05`.
+
+Over several records (`diebold_mariano_records`) the loss differences of each record,
+scaled by that record's output variance (a squared NRMSE, so that no record weighs by
+its units), are independent of the other records' and the long-run variances add:
+
+    DM = sum_r N_r mean(d_r) / sqrt(sum_r N_r S_r),
+
+each `S_r` with its own Andrews bandwidth. The loop uses it to weigh the evidence of
+every record it has: the estimation records (in sample) and the validation record (out
+of sample).
 """
 
 from __future__ import annotations
@@ -124,3 +134,43 @@ def diebold_mariano(e0, e1, loss: str = "simulation", lags: int | None = None) -
         statistic = mean / math.sqrt(variance / n)
     p_value = float(scipy.stats.norm.sf(statistic))
     return Comparison(loss, float(statistic), int(bandwidth), rho, mean, p_value, n)
+
+
+def diebold_mariano_records(e0s, e1s, scales=None, loss: str = "simulation") -> Comparison:
+    """The Diebold-Mariano statistic pooled over independent records (module docstring):
+    `e0s[r]`, `e1s[r]` the current and the candidate model's errors on record `r`, each
+    record's loss difference divided by `scales[r]` (default 1). `bandwidth` is the
+    largest record's lag, `rho` the sample-weighted lag-1 autocorrelation,
+    `mean_difference` the pooled mean of the scaled differences."""
+    e0s, e1s = list(e0s), list(e1s)
+    scales = [1.0] * len(e0s) if scales is None else [float(s) for s in scales]
+    if not (len(e0s) == len(e1s) == len(scales)) or not e0s:
+        raise ValueError("diebold_mariano_records: as many error series and scales, at least one.")
+    total, variance, n, rhos, lags = 0.0, 0.0, 0, 0.0, 0
+    for e0, e1, scale in zip(e0s, e1s, scales, strict=True):
+        e0 = np.asarray(e0, dtype=np.float64)
+        e1 = np.asarray(e1, dtype=np.float64)
+        if e0.shape != e1.shape or e0.ndim != 1:
+            raise ValueError(
+                f"diebold_mariano_records: errors of shapes {e0.shape} and {e1.shape}."
+            )
+        with np.errstate(over="ignore", invalid="ignore"):
+            d = (e0**2 - e1**2) / (scale if scale > 0 else 1.0)
+        if not np.all(np.isfinite(d)):
+            worse = not np.all(np.isfinite(e1))
+            statistic = -math.inf if worse else math.inf
+            return Comparison(
+                loss, statistic, 0, math.nan, statistic, 1.0 if worse else 0.0, d.size
+            )
+        lag, rho = andrews_bandwidth(d)
+        total += float(np.sum(d))
+        variance += d.size * (long_run_variance(d, lag) if d.size > 1 else 0.0)
+        n += d.size
+        rhos += rho * d.size
+        lags = max(lags, lag)
+    if not variance > 0:
+        statistic = 0.0 if total == 0 else math.copysign(math.inf, total)
+    else:
+        statistic = total / math.sqrt(variance)
+    p_value = float(scipy.stats.norm.sf(statistic))
+    return Comparison(loss, float(statistic), int(lags), rhos / n, total / n, p_value, n)

@@ -42,3 +42,24 @@ def test_the_same_estimates_with_xlas_defaults():
     tuned = jax.jit(jax.vmap(one), compiler_options=compiler_options())(keys)
     default = jax.jit(jax.vmap(one))(keys)
     np.testing.assert_allclose(tuned, default, rtol=1e-9, atol=1e-12)
+
+
+def test_bound_releases_past_its_program_limit_and_keeps_programs_under_it():
+    # Issue 21: the loop's stages share programs until more than `programs` were
+    # compiled since the last release (or the process maps too much); then all go.
+    from jaxcascade._compile import bound, compile_count, mappings, release
+
+    release()
+    square, x = jax.jit(lambda x: x * x), np.ones(3)
+    square(x)
+    assert compile_count() >= 1
+    assert not bound(programs=10**6, mapped=10**9)  # under both limits: kept
+    before = compile_count()
+    square(x)
+    assert compile_count() == before  # reused, not compiled again
+    assert bound(programs=0, mapped=10**9)  # one program past a limit of none
+    square(x)
+    assert compile_count() > before  # released: compiled again
+    if mappings() is not None:
+        assert mappings() > 0
+        assert bound(programs=10**6, mapped=0)

@@ -9,7 +9,12 @@ import pytest
 import scipy.signal
 import scipy.stats
 
-from jaxcascade._significance import andrews_bandwidth, diebold_mariano, long_run_variance
+from jaxcascade._significance import (
+    andrews_bandwidth,
+    diebold_mariano,
+    diebold_mariano_records,
+    long_run_variance,
+)
 
 
 def _coloured(rng, pole, shape):
@@ -93,3 +98,37 @@ def test_a_diverged_candidate_is_worse():
     assert diebold_mariano(bad, e).statistic == math.inf
     with pytest.raises(ValueError, match="shapes"):
         diebold_mariano(e, e[:-1])
+
+
+def test_pooled_statistic_of_one_record_is_the_record_statistic():
+    # Issue 21: pooled over one record (any scale), the statistic is that record's.
+    rng = np.random.default_rng(3)
+    e0, e1 = rng.normal(size=500), 0.9 * rng.normal(size=500)
+    one = diebold_mariano(e0, e1)
+    pooled = diebold_mariano_records([e0], [e1], [4.0])
+    assert math.isclose(pooled.statistic, one.statistic, rel_tol=1e-12)
+    assert pooled.bandwidth == one.bandwidth and pooled.n == one.n
+
+
+def test_pooled_statistic_adds_the_evidence_of_independent_records():
+    # Independent records of the same improvement: the pooled statistic grows like the
+    # square root of the number of records, and scaling a record by its output variance
+    # makes it weigh the same in any units.
+    rng = np.random.default_rng(4)
+    pairs = [(rng.normal(size=400), 0.95 * rng.normal(size=400)) for _ in range(9)]
+    singles = [diebold_mariano(e0, e1).statistic for e0, e1 in pairs]
+    pooled = diebold_mariano_records([p[0] for p in pairs], [p[1] for p in pairs])
+    assert pooled.statistic > 2 * np.mean(singles)
+    scaled = diebold_mariano_records(
+        [p[0] * (10.0 if i == 0 else 1.0) for i, p in enumerate(pairs)],
+        [p[1] * (10.0 if i == 0 else 1.0) for i, p in enumerate(pairs)],
+        [100.0] + [1.0] * 8,
+    )
+    assert math.isclose(scaled.statistic, pooled.statistic, rel_tol=1e-9)
+
+
+def test_pooled_statistic_of_a_diverged_candidate_is_minus_infinity():
+    e0 = np.ones(50)
+    e1 = np.ones(50)
+    e1[10] = np.inf
+    assert diebold_mariano_records([e0, e0], [e0, e1]).statistic == -math.inf

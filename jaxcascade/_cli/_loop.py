@@ -103,14 +103,15 @@ def _markdown(report: dict, command: str) -> str:
         f"{100 * test['min_gain']:g} %. Loss: the simulation error for an effect, the "
         "one-step-ahead prediction error for the noise model.",
         "",
-        "| round | effect | action | variant | NRMSE | prediction NRMSE | loss | DM | L | p | "
-        "significant | signature matches |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| round | effect | action | variant | NRMSE | prediction NRMSE | loss | DM | "
+        "DM, validation alone | L | p | significant | signature matches |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for c in report["candidates"]:
         lines.append(
             f"| {c['round']} | {c['name']} | {c['action']} | {c['variant']} | {c['error']:.4f} | "
-            f"{c['prediction_error']:.4f} | {c['loss']} | {c['t']:.2f} | {c['bandwidth']} | "
+            f"{c['prediction_error']:.4f} | {c['loss']} | {c['t']:.2f} | {c['t_validation']:.2f} | "
+            f"{c['bandwidth']} | "
             f"{c['p_value']:.2g} | {c['significant']} | {c['signature_match']} |"
         )
     lines += [
