@@ -2,6 +2,7 @@
 
     python benchmarks/brfd.py [--data ../shared/data/brfd] [--out results/brfd]
         [--decimate 16] [--init-samples 50] [--only NAME] [--stability] [--all-records]
+        [--jobs N]
 
 Each run is `jaxcascade loop` in a fresh process (its report in OUT/<run>/), timed, its
 peak resident memory (`wait4`), its largest count of memory mappings (sampled every
@@ -31,6 +32,7 @@ published ones.
 from __future__ import annotations
 
 import argparse
+import concurrent.futures
 import json
 import os
 import pathlib
@@ -94,6 +96,26 @@ def runs(data: pathlib.Path, args):
     if args.all_records:
         every = harmonic_files(data, None) + [data / FILES["kocaeli"]]
         yield "all21+kocaeli_to_imperialvalley", every, "imperialvalley", [], 8, []
+
+
+def loop_argv(out, data, args, run, train, valid, tests, decimate, extra) -> list[str]:
+    """The `jaxcascade loop` arguments of one run (its report in OUT/<run>/)."""
+    report = out / run
+    report.mkdir(parents=True, exist_ok=True)
+    window = WINDOWS[valid]
+    loop = ["loop", *map(str, train), "--validate", str(data / FILES[valid])]
+    loop += ["--input", "displacement_in", "--output", "force_kip", "--time", "time_s"]
+    loop += ["--decimate", str(decimate), "--window", f"{window[0]}:{window[1]}"]
+    loop += ["--init-samples", str(args.init_samples)]
+    loop += ["--max-effects", str(args.max_effects), "--json", "--report", str(report)]
+    if tests:
+        loop += ["--test", *(str(data / FILES[t]) for t in tests)]
+        loop += ["--test-window", *(f"{WINDOWS[t][0]}:{WINDOWS[t][1]}" for t in tests)]
+    if args.effects:
+        loop += ["--effects", args.effects]
+    loop += extra
+    print(f"{run}: jaxcascade {' '.join(loop)}", file=sys.stderr, flush=True)
+    return loop
 
 
 def run_loop(argv: list[str]) -> dict:
@@ -176,6 +198,13 @@ def main(argv=None) -> int:
     parser.add_argument("--max-effects", type=int, default=2)
     parser.add_argument("--only", default=None, help="run only the runs whose name holds this")
     parser.add_argument("--stability", action="store_true", help="retries 0/2 x seeds 0-2")
+    parser.add_argument(
+        "--jobs",
+        type=int,
+        default=1,
+        help="loops run at once, each in its own process (default 1; with more, the wall "
+        "times overlap and say nothing of one run's cost)",
+    )
     parser.add_argument("--all-records", action="store_true", help="the 21-record run")
     parser.add_argument(
         "--effects",
@@ -188,25 +217,15 @@ def main(argv=None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     command = "python benchmarks/brfd.py " + " ".join(sys.argv[1:] if argv is None else argv)
     rows, resources, choices = [], [], []
-    for run, train, valid, tests, decimate, extra in runs(data, args):
-        if args.only and args.only not in run:
-            continue
+    planned = [r for r in runs(data, args) if not args.only or args.only in r[0]]
+    loops = [loop_argv(out, data, args, *r) for r in planned]
+    # each loop a fresh process; `--jobs` of them at a time (wall times then overlap)
+    with concurrent.futures.ThreadPoolExecutor(max_workers=max(1, args.jobs)) as pool:
+        measurements = list(pool.map(run_loop, loops))
+    for (run, train, valid, tests, decimate, _extra), measured in zip(
+        planned, measurements, strict=True
+    ):
         report = out / run
-        report.mkdir(parents=True, exist_ok=True)
-        window = WINDOWS[valid]
-        loop = ["loop", *map(str, train), "--validate", str(data / FILES[valid])]
-        loop += ["--input", "displacement_in", "--output", "force_kip", "--time", "time_s"]
-        loop += ["--decimate", str(decimate), "--window", f"{window[0]}:{window[1]}"]
-        loop += ["--init-samples", str(args.init_samples)]
-        loop += ["--max-effects", str(args.max_effects), "--json", "--report", str(report)]
-        if tests:
-            loop += ["--test", *(str(data / FILES[t]) for t in tests)]
-            loop += ["--test-window", *(f"{WINDOWS[t][0]}:{WINDOWS[t][1]}" for t in tests)]
-        if args.effects:
-            loop += ["--effects", args.effects]
-        loop += extra
-        print(f"{run}: jaxcascade {' '.join(loop)}", file=sys.stderr, flush=True)
-        measured = run_loop(loop)
         if measured["returncode"] != 0:
             raise SystemExit(f"{run}: the loop failed (exit {measured['returncode']})")
         full = json.loads((report / "report.json").read_text())
