@@ -137,3 +137,22 @@ def test_a_breakpoint_outside_the_input_warns(tmp_path, capsys):
     assert [line for line in lines if "warning" in line] == [
         line for line in lines if line.startswith("jaxcascade: warning: The true breakpoint(s)")
     ]
+
+
+def test_distribution_is_the_old_name_of_kind_and_old_run_identities_still_match():
+    import numpy as np
+
+    from jaxcascade._montecarlo._run import _check_same, _identity
+
+    old = {"example": 1, "n": [300], "input": {"distribution": "uniform", "amplitude": 2.0}}
+    assert Spec.from_dict(old) == Spec(example=1, n=300)
+    with pytest.raises(ValueError, match="kind and distribution"):
+        Spec.from_dict({**old, "input": {"distribution": "uniform", "kind": "gaussian"}})
+    # a partial run written before input designs and noise kinds: its stamp still matches
+    spec = Spec(example=1, n=300)
+    stored = {"spec": {**spec.to_dict(chunk_size=False), "input": old["input"]}}
+    stored["spec"].pop("noise")
+    stored["dtype"] = "float64"
+    _check_same(stored, _identity(spec, np.float64), "stamp")
+    with pytest.raises(ValueError, match="different spec"):
+        _check_same(stored, _identity(Spec(example=1, n=300, noise="student_t"), np.float64), "x")
