@@ -50,7 +50,7 @@ import pandas as pd
 
 from .._compile import compiler_options
 from .._efficiency import crlb
-from .._estimator import estimator
+from .._estimator import estimator, is_host
 from .._metrics import nrmse
 from .._model import CascadeParams, is_admissible
 from .._normal_equations import resolve
@@ -98,14 +98,11 @@ def _system_tag(family: str) -> np.uint32:
     return np.uint32(_hash_words(f"system:{family}")[0])
 
 
-def _realisation(
-    cell_key, index, truth_vector, snr, *, orders, n, amplitude, fit, fit_key_tag, family
-):
-    """One record: input, noisy output, fit, validation on a fresh record.
-
-    With a `family`, `truth_vector` only gives the dtype: the true system is drawn from
-    the family's prior with a key folded from the realisation key.
-    """
+def _draw(cell_key, index, truth_vector, snr, *, orders, n, amplitude, family):
+    """One realisation's records: input, noisy output, the record's Cramér-Rao bound, and
+    the fresh validation record (module docstring). With a `family`, `truth_vector` only
+    gives the dtype: the true system is drawn from the family's prior with a key folded
+    from the realisation key."""
     dtype = truth_vector.dtype
     key = jax.random.fold_in(cell_key, index)
     if family is not None:
@@ -115,19 +112,22 @@ def _realisation(
     key_u, key_e, key_u_val, key_e_val = jax.random.split(key, 4)
     u = uniform_input(key_u, n, amplitude, dtype)
     y = add_noise(key_e, simulate(truth, u), snr)
-    # the record's own Cramér-Rao bound (noise-free: 0), for the efficiency columns
-    bound = crlb(truth, u, snr=snr)
-    solution = fit(
-        u,
-        y,
-        orders,
-        key=jax.random.fold_in(key, fit_key_tag),
-        input_range=(-amplitude, amplitude),
-    )
-    estimate = solution.params.to_vector().astype(dtype)
-
     u_val = uniform_input(key_u_val, n, amplitude, dtype)
     y_val = add_noise(key_e_val, simulate(truth, u_val), snr)
+    return {
+        "key": key,
+        "u": u,
+        "y": y,
+        "u_val": u_val,
+        "y_val": y_val,
+        "truth": truth_vector,
+        # the record's own Cramér-Rao bound (noise-free: 0), for the efficiency columns
+        "crlb": crlb(truth, u, snr=snr),
+    }
+
+
+def _score(estimate, truth_vector, u_val, y_val, *, orders, amplitude):
+    """Validation NRMSE of an estimate on the fresh record and whether it is admissible."""
     admissible = is_admissible(
         CascadeParams.from_vector(estimate, orders, check=False), -amplitude, amplitude
     )
@@ -137,20 +137,47 @@ def _realisation(
         jnp.where(admissible, estimate, truth_vector), orders, check=False
     )
     error = nrmse(y_val, simulate(safe, u_val))
-    error = jnp.where(admissible & jnp.isfinite(error), error, jnp.inf)
+    return jnp.where(admissible & jnp.isfinite(error), error, jnp.inf), admissible
+
+
+def _outputs(drawn, solution, estimate, error, admissible):
+    key = drawn["key"]
+    dtype = drawn["truth"].dtype
     return {
         "key": jax.random.key_data(key) if _is_typed(key) else key,
         "estimate": estimate,
-        "status": solution.status.astype(jnp.int32),
-        "iterations": solution.iterations.astype(jnp.int32),
+        "status": jnp.asarray(solution.status).astype(jnp.int32),
+        "iterations": jnp.asarray(solution.iterations).astype(jnp.int32),
         "cost": jnp.asarray(solution.cost, dtype),
         "cycle_amplitude": jnp.asarray(solution.cycle_amplitude, dtype),
-        "path": solution.path.astype(jnp.int32),
+        "path": jnp.asarray(solution.path).astype(jnp.int32),
         "nrmse": error,
         "admissible": admissible,
-        "truth": truth_vector,
-        "crlb": bound,
+        "truth": drawn["truth"],
+        "crlb": drawn["crlb"],
     }
+
+
+def _realisation(
+    cell_key, index, truth_vector, snr, *, orders, n, amplitude, fit, fit_key_tag, family
+):
+    """One record: input, noisy output, fit, validation on a fresh record (`_draw`, the
+    estimator, `_score`)."""
+    drawn = _draw(
+        cell_key, index, truth_vector, snr, orders=orders, n=n, amplitude=amplitude, family=family
+    )
+    solution = fit(
+        drawn["u"],
+        drawn["y"],
+        orders,
+        key=jax.random.fold_in(drawn["key"], fit_key_tag),
+        input_range=(-amplitude, amplitude),
+    )
+    estimate = solution.params.to_vector().astype(drawn["truth"].dtype)
+    error, admissible = _score(
+        estimate, drawn["truth"], drawn["u_val"], drawn["y_val"], orders=orders, amplitude=amplitude
+    )
+    return _outputs(drawn, solution, estimate, error, admissible)
 
 
 def _is_typed(key) -> bool:
@@ -222,6 +249,87 @@ def _executable(spec: Spec, cell: Cell, arguments) -> tuple:
     return compiled, seconds
 
 
+@functools.lru_cache(maxsize=16)
+def _host_programs(orders, n, amplitude, family):
+    """The batched draw and score of a cell shape whose estimator runs on the host."""
+    draw = functools.partial(_draw, orders=orders, n=n, amplitude=amplitude, family=family)
+    score = functools.partial(_score, orders=orders, amplitude=amplitude)
+    options = compiler_options()
+    return (
+        jax.jit(jax.vmap(draw, in_axes=(None, 0, None, None)), compiler_options=options),
+        jax.jit(jax.vmap(score), compiler_options=options),
+    )
+
+
+def _host_chunk(spec: Spec, cell: Cell, fit, indices: np.ndarray, size: int) -> dict:
+    """Realisations `indices` with a host estimator (`_estimator._host`): the records are
+    drawn and the estimates scored in compiled, batched calls (padded to `size`, so a
+    cell compiles once), the fits run one record after another on the host, each timed
+    (`fit_seconds` per row)."""
+    draw, score = _host_programs(spec.orders, cell.n, spec.amplitude, spec.family)
+    padded = np.concatenate([indices, np.full(size - indices.size, indices[-1])])
+    key, truth, snr = _arguments(spec, cell)
+    arguments = (key, jnp.asarray(padded.astype(np.uint32)), truth, snr)
+    cache_key = ("host", spec.orders, cell.n, spec.amplitude, spec.family, size, str(truth.dtype))
+    compile_seconds = 0.0
+    if cache_key not in _EXECUTABLES:
+        start = time.perf_counter()
+        shapes = jax.eval_shape(draw, *arguments)
+        estimate = jax.ShapeDtypeStruct(shapes["truth"].shape, truth.dtype)
+        _EXECUTABLES[cache_key] = (
+            draw.lower(*arguments).compile(),
+            score.lower(estimate, shapes["truth"], shapes["u_val"], shapes["y_val"]).compile(),
+        )
+        compile_seconds = time.perf_counter() - start
+    draw, score = _EXECUTABLES[cache_key]
+    drawn = {k: np.asarray(v) for k, v in jax.device_get(draw(*arguments)).items()}
+    count = indices.size
+    kinds = {"status": np.int32, "iterations": np.int32, "cost": float, "cycle_amplitude": float}
+    fields = {name: np.zeros(count, kind) for name, kind in {**kinds, "path": np.int32}.items()}
+    estimates = drawn["truth"].copy()  # padded rows: the truth stands in, never read
+    seconds = np.zeros(count)
+    for i in range(count):
+        u, y = np.array(drawn["u"][i]), np.array(drawn["y"][i])  # the function's own copies
+        start = time.perf_counter()
+        vector = fit.vector(u, y, spec.orders)
+        seconds[i] = time.perf_counter() - start
+        solution = fit.solution(vector, drawn["u"][i], drawn["y"][i], spec.orders)
+        estimates[i] = np.asarray(solution.params.to_vector(), np.float64)
+        for name in fields:
+            fields[name][i] = np.asarray(getattr(solution, name))
+    errors, admissible = jax.device_get(
+        score(jnp.asarray(estimates, truth.dtype), drawn["truth"], drawn["u_val"], drawn["y_val"])
+    )
+    key_data = drawn["key"] if drawn["key"].ndim == 2 else np.asarray(drawn["key"])
+    return {
+        "key": key_data[:count],
+        "estimate": estimates[:count],
+        **{name: values for name, values in fields.items()},
+        "nrmse": np.asarray(errors)[:count],
+        "admissible": np.asarray(admissible)[:count],
+        "truth": drawn["truth"][:count],
+        "crlb": drawn["crlb"][:count],
+        "fit_seconds": seconds,
+        "compile_seconds": compile_seconds,
+    }
+
+
+def _fit(spec: Spec, cell: Cell):
+    """The cell's estimator with its settings."""
+    return estimator(cell.estimator, **dict(spec.estimator_settings(cell.estimator)))
+
+
+def records(spec: Spec, cell: Cell, indices) -> dict[str, np.ndarray]:
+    """The records realisations `indices` of `cell` fit (`u`, `y`, one row each) and
+    their validation records (`u_val`, `y_val`): the same for every estimator of a
+    sweep, for checking a table's rows against direct fits."""
+    indices = np.asarray(indices, np.int64)
+    draw, _ = _host_programs(spec.orders, cell.n, spec.amplitude, spec.family)
+    key, truth, snr = _arguments(spec, cell)
+    drawn = jax.device_get(draw(key, jnp.asarray(indices.astype(np.uint32)), truth, snr))
+    return {name: np.asarray(drawn[name]) for name in ("u", "y", "u_val", "y_val")}
+
+
 def run_chunk(spec: Spec, cell: Cell, indices) -> pd.DataFrame:
     """Realisations `indices` of `cell`, batched in one compiled call; one row each
     (`frame.attrs["normal_equations"]` says how the normal equations were formed).
@@ -236,6 +344,13 @@ def run_chunk(spec: Spec, cell: Cell, indices) -> pd.DataFrame:
     if indices.min() < 0 or indices.max() >= 2**32:
         raise ValueError("Realisation indices must lie in [0, 2**32).")
     size = max(spec.chunk_size, indices.size)
+    fit = _fit(spec, cell)
+    if is_host(fit):
+        outputs = _host_chunk(spec, cell, fit, indices, size)
+        outputs["key"] = _key_to_uint64(outputs["key"])
+        frame = realisation_frame(spec, cell, indices, outputs)
+        frame.attrs["normal_equations"] = normal_equations_backend(spec)
+        return frame
     padded = np.concatenate([indices, np.full(size - indices.size, indices[-1])])
     key, truth, snr = _arguments(spec, cell)
     arguments = (key, jnp.asarray(padded.astype(np.uint32)), truth, snr)
@@ -261,6 +376,10 @@ def normal_equations_backend(spec: Spec, dtype=None) -> str:
 
 def run_realisation(spec: Spec, cell: Cell, index: int) -> dict:
     """One realisation without `vmap` (to rerun a table row, and the batching oracle)."""
+    if is_host(_fit(spec, cell)):
+        out = _host_chunk(spec, cell, _fit(spec, cell), np.asarray([index], np.int64), 1)
+        out["key"] = _key_to_uint64(out["key"])
+        return {k: np.asarray(v)[0] if np.ndim(v) else np.asarray(v) for k, v in out.items()}
     key, truth, snr = _arguments(spec, cell)
     out = jax.device_get(_function(spec, cell, batched=False)(key, np.uint32(index), truth, snr))
     out = {k: np.asarray(v) for k, v in out.items()}
@@ -278,7 +397,11 @@ def chunk_memory(spec: Spec, cell: Cell, chunk_size: int | None = None) -> dict[
     size = chunk_size or spec.chunk_size
     key, truth, snr = _arguments(spec, cell)
     indices = jnp.zeros((size,), jnp.uint32)
-    compiled = _function(spec, cell, batched=True).lower(key, indices, truth, snr).compile()
+    if is_host(_fit(spec, cell)):  # the compiled part is the draw (and the small score)
+        program = _host_programs(spec.orders, cell.n, spec.amplitude, spec.family)[0]
+    else:
+        program = _function(spec, cell, batched=True)
+    compiled = program.lower(key, indices, truth, snr).compile()
     analysis = compiled.memory_analysis()
     sizes = {
         "temp": int(analysis.temp_size_in_bytes),

@@ -15,7 +15,8 @@ per parameter with the estimate, `crlb_<name>` with the record's own output-erro
 Cramér-Rao bound on its standard deviation (`_efficiency.crlb`; 0 noise-free),
 `true_<name>` with the
 true value (the row's own for a family of systems), and the timing columns
-`fit_seconds` (compute seconds per fit of its chunk, compilation excluded) and
+`fit_seconds` (compute seconds per fit of its chunk, compilation excluded; a host
+function's own time on the row's record) and
 `compile_seconds` (seconds its chunk spent compiling, 0 when cached); the timing
 columns are the only ones that differ between two runs of one spec (`without_timing`).
 
@@ -124,7 +125,9 @@ def realisation_frame(spec, cell, indices, outputs: dict) -> pd.DataFrame:
         for j, name in enumerate(names):
             columns[crlb_column(name)] = bounds[:, j]
     for name in TIMING_COLUMNS:
-        columns[name] = np.full(count, float(outputs.get(name, np.nan)))
+        # one figure per chunk (batched estimators), or one per row (host functions)
+        values = np.asarray(outputs.get(name, np.nan), dtype=np.float64)
+        columns[name] = np.broadcast_to(values, (count,)).copy()
     return pd.DataFrame(columns)
 
 
