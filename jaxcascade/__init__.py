@@ -14,9 +14,10 @@ Estimators (each fits one record and returns a `Solution` with a `Status`)
     coloured output noise); the registry `ESTIMATORS` and `estimator` (`estimator(name,
     **settings)`); `register_estimator` (a user's own: an `Estimator` class or a host
     function `fn(u, y, orders) -> vector`; also the entry-point group
-    `jaxcascade.estimators`); `Estimator`, the interface; `initial_guess`, `regression` (the key-term regression,
-    eqs. 15-18); `status_names` (codes to names); `solution_table` (a `Solution` of
-    any batch shape, e.g. after `jax.vmap`, as a pandas DataFrame, one row per record).
+    `jaxcascade.estimators`); `Estimator`, the interface; `initial_guess`,
+    `regression` (the key-term regression, eqs. 15-18); `status_names` (codes to
+    names); `solution_table` (a `Solution` of any batch shape, e.g. after `jax.vmap`, as
+    a pandas DataFrame, one row per record).
     Records are checked before any work: one 1-D record of real, finite numbers (lists
     and NumPy arrays are converted), `u` and `y` of equal length, at least
     `Orders.min_samples` samples; anything else is a `ValueError` or `TypeError` saying

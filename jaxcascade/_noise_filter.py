@@ -27,16 +27,23 @@ CRITERIA = ("aic", "bic", "none")
 
 
 def coefficients(poles=(), zeros=()) -> tuple[np.ndarray, np.ndarray]:
-    """`(c, d)` of the noise with real `poles` and `zeros` (each inside the unit circle):
-    `A(q) = prod (1 - p q^-1)`, `c = -A[1:]`; `C(q) = prod (1 - z q^-1)`, `d = C[1:]`.
-    A `ValueError` for a root on or outside the unit circle (the noise would not be
-    stationary, or its predictor unstable)."""
+    """`(c, d)` of the noise with real `poles` (inside the unit circle) and `zeros`:
+    `A(q) = prod (1 - p q^-1)`, `c = -A[1:]`; `C(q) = prod (1 - z q^-1)`, `d = C[1:]`. A
+    zero outside the unit circle is replaced by its reciprocal: the same spectrum up to
+    a gain (which `variance_ratio` absorbs), and the predictor's (minimum-phase) form.
+    A `ValueError` for a pole on or outside the unit circle (not stationary) or a zero
+    on it (no stable predictor)."""
     for kind, roots in (("pole", poles), ("zero", zeros)):
         for root in roots:
             if not (isinstance(root, int | float) and not isinstance(root, bool)):
                 raise ValueError(f"A noise {kind} must be a real number, got {root!r}.")
-            if not abs(root) < 1:
-                raise ValueError(f"A noise {kind} must lie inside the unit circle, got {root}.")
+    for pole in poles:
+        if not abs(pole) < 1:
+            raise ValueError(f"A noise pole must lie inside the unit circle, got {pole}.")
+    for zero in zeros:
+        if abs(zero) == 1:
+            raise ValueError(f"A noise zero on the unit circle has no stable predictor: {zero}.")
+    zeros = tuple(z if abs(z) < 1 else 1 / z for z in zeros)
     A = np.poly(np.asarray(poles, float)) if len(poles) else np.ones(1)
     C = np.poly(np.asarray(zeros, float)) if len(zeros) else np.ones(1)
     return -np.asarray(A[1:], float), np.asarray(C[1:], float)

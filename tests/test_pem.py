@@ -50,6 +50,8 @@ def test_whiten_and_variance_ratio_agree_with_scipy():
     np.testing.assert_allclose(float(variance_ratio(c, d)), np.sum(impulse**2), rtol=1e-12)
     with pytest.raises(ValueError, match="inside the unit circle"):
         coefficients((1.0,))
+    # a zero outside the unit circle: its reciprocal, the same spectrum's predictor
+    np.testing.assert_allclose(coefficients((), (2.0,))[1], coefficients((), (0.5,))[1])
 
 
 def test_reflection_parameterisation_round_trips():
@@ -98,6 +100,10 @@ def test_information_factor_of_student_t_by_integration():
     variance = nu / (nu - 2)
     assert information_factor("student_t", dof=nu) == pytest.approx(information * variance)
     assert information_factor() == 1.0
+    # outliers far from the Gaussian part: every sample, hit or not, locates the noise's
+    # centre as well as a Gaussian sample of unit variance, whose variance is 1 + f k^2
+    assert information_factor("outliers", fraction=0.02, size=10.0) == pytest.approx(3.0, 1e-4)
+    assert information_factor("outliers", fraction=0.0, size=10.0) == pytest.approx(1.0)
     with pytest.raises(ValueError, match="dof > 2"):
         information_factor("student_t", dof=2)
 
