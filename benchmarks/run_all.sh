@@ -70,8 +70,14 @@ recursive() {  # issue 25: the recursive estimator: speed, noise-free, vs batch,
     python benchmarks/recursive_tracking.py --out results/recursive_tracking
 }
 
+noise() {  # issue 24: pem under AR(1) noise drawn by the script; the noise study
+    python benchmarks/pem_coloured.py --realisations 200 --estimators pem,robust \
+        --out results/pem_coloured
+    python benchmarks/noise_study.py --realisations 200 --out results/noise_study
+}
+
 steps=("$@")
-[ ${#steps[@]} -gt 0 ] || steps=(bench bench_robust distributed robust sweeps literal efficiency loop reproduce recursive)
+[ ${#steps[@]} -gt 0 ] || steps=(bench bench_robust distributed robust sweeps literal efficiency loop reproduce recursive noise)
 for step in "${steps[@]}"; do
     echo "== $step"
     "$step"

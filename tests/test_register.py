@@ -208,3 +208,8 @@ def test_bench_times_a_registered_host_function(registry, capsys):
     assert figures["estimator"] == "mean_host" and figures["fits_per_s"] > 0
     assert figures["recovered"] == 0  # MR1 from the output's mean is no estimate
     assert main(["bench", "--estimator", "nowhere"]) == 2
+
+
+def test_the_docs_show_the_complete_example():
+    text = (ROOT / "docs" / "estimators.md").read_text()
+    assert EXAMPLE.read_text() in text
