@@ -133,6 +133,20 @@ def crlb(
     return _bound(*_whitened(params, u, snr, sigma, poles, zeros))
 
 
+def noise_bound_options(noise=None) -> dict:
+    """The keywords of `crlb` for a noise model: `poles` and `zeros` of linear noise (any
+    object with those attributes, e.g. the sweep's `ar` and `arma` noise kinds); none for
+    white or heavy-tailed noise, whose table bound is the Gaussian one of the noise's
+    variance (module docstring). Host side: `crlb(truth, u, snr=snr,
+    **noise_bound_options(noise))`."""
+    if noise is None:
+        return {}
+    return {
+        "poles": tuple(float(p) for p in getattr(noise, "poles", ())),
+        "zeros": tuple(float(z) for z in getattr(noise, "zeros", ())),
+    }
+
+
 def information_factor(kind: str = "gaussian", **settings) -> float:
     """Fisher information of a noise density about its location, times its variance: 1
     for Gaussian noise (the largest: every other density of that variance carries more),

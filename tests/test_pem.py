@@ -90,6 +90,18 @@ def test_coloured_bound_is_the_whitened_jacobians():
     np.testing.assert_allclose(white, sigma * np.sqrt(np.diag(np.linalg.inv(J.T @ J))), rtol=1e-6)
 
 
+def test_noise_bound_options_read_poles_and_zeros():
+    import types
+
+    from jaxcascade._efficiency import noise_bound_options
+
+    arma = types.SimpleNamespace(poles=(0.9,), zeros=[0.3])
+    assert noise_bound_options(arma) == {"poles": (0.9,), "zeros": (0.3,)}
+    heavy = types.SimpleNamespace(dof=3.0)  # no filter: the Gaussian bound of its variance
+    assert noise_bound_options(heavy) == {"poles": (), "zeros": ()}
+    assert noise_bound_options() == {}
+
+
 def test_information_factor_of_student_t_by_integration():
     nu = 3.0
 
