@@ -69,6 +69,10 @@ recursive() {  # issue 25: the recursive estimator: speed, noise-free, vs batch,
     python benchmarks/recursive_vs_batch.py --seed 1000 --out results/recursive_vs_batch
     python benchmarks/recursive_tracking.py --out results/recursive_tracking
 }
+inputs() {  # issue 24: input designs at equal power (reads the shared damper record)
+    python benchmarks/input_design.py --realisations 200 --data "${BRFD_DATA:-../shared/data/brfd}" \
+        --out results/input_design
+}
 
 noise() {  # issue 24: pem under AR(1) noise drawn by the script; the noise study
     python benchmarks/pem_coloured.py --realisations 200 --estimators pem,robust \
@@ -77,7 +81,7 @@ noise() {  # issue 24: pem under AR(1) noise drawn by the script; the noise stud
 }
 
 steps=("$@")
-[ ${#steps[@]} -gt 0 ] || steps=(bench bench_robust distributed robust sweeps literal efficiency loop reproduce recursive noise)
+[ ${#steps[@]} -gt 0 ] || steps=(bench bench_robust distributed robust sweeps literal efficiency loop reproduce recursive inputs noise)
 for step in "${steps[@]}"; do
     echo "== $step"
     "$step"

@@ -7,6 +7,11 @@ Model and simulation
     `measure`, `add_noise`, `uniform_input`, `pwl`, `linear_block`, `backlash`;
     `example`, `EXAMPLES`, `Example` (the paper's two examples); `random_system` (the
     random-system prior).
+Inputs and noise of an experiment
+    `INPUTS`, `input_design`, `InputDesign` (uniform, gaussian, multisine, multilevel,
+    file: `input_design(kind, **settings)(key, n)` draws one record); `NOISES`,
+    `disturbance`, `Disturbance` (white, ar, arma, student_t, outliers: unit-variance
+    noise for `add_noise(key, y, snr, noise)`).
 Estimators (each fits one record and returns a `Solution` with a `Status`)
     `Literal` / `voros` (the paper's iteration, eqs. 19-28), `Robust` / `robust`
     (output-error least squares from the literal estimate, multi-start fallback),
@@ -140,6 +145,16 @@ _MODULES = {
         "summarise",
     ),
     "._noise": ("ARNoise",),
+    "._disturbance": (
+        "Disturbance",
+        "NOISES",
+        "disturbance",
+    ),
+    "._inputs": (
+        "INPUTS",
+        "InputDesign",
+        "input_design",
+    ),
     "._plot._residuals": (
         "plot_residual_tests",
         "residual_figures",

@@ -282,6 +282,43 @@ def read_record(
     )
 
 
+def read_column(
+    path: str | os.PathLike,
+    column: str,
+    *,
+    format: str | None = None,
+    decimate: int = 1,
+    anti_alias: str = "fir",
+) -> np.ndarray:
+    """One numeric column of a CSV or Parquet file as float64 (e.g. a measured input to
+    reuse in a simulated experiment), decimated as `read_record` does; the same checks
+    (missing file or column, non-numeric, NaN or infinite values, a constant column) with
+    the same sentences."""
+    path = os.fspath(path)
+    if not os.path.isfile(path):
+        raise ValueError(f"Data file {path!r} does not exist; check the path.")
+    if isinstance(decimate, bool) or not isinstance(decimate, int) or decimate < 1:
+        raise ValueError(f"decimate must be a positive integer, got {decimate!r}.")
+    if anti_alias not in _FILTERS:
+        raise ValueError(f"Unknown anti-alias filter {anti_alias!r}; use 'fir' or 'iir'.")
+    frame = _read_frame(path, _format_of(path, format))
+    available = [str(c) for c in frame.columns]
+    if column not in available:
+        close = difflib.get_close_matches(column, available, 1, 0.6)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        raise ValueError(
+            f"Column {column!r} not found in {path!r}; available columns are "
+            f"{', '.join(map(repr, available))}{hint}."
+        )
+    frame.columns = available
+    values = _numeric_column(frame[column], column, path)
+    _check_finite(values, column, path)
+    if decimate > 1:
+        values = _decimate(values, decimate, anti_alias)
+    _check_not_constant(values, column, path, "input")
+    return np.ascontiguousarray(values, dtype=np.float64)
+
+
 def record_from_arrays(
     u,
     y,

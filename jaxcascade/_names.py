@@ -2,7 +2,8 @@
 
 Building `--help` must not import JAX (it then answers at once), so the names it lists
 live here as well as in their registries (`_estimator.ESTIMATORS`, `_effects.EFFECTS`,
-`_noise.ARNoise`, `_montecarlo._spec.FAMILIES`, `_benchmark._robust.SYSTEMS`);
+`_noise.ARNoise`, `_montecarlo._spec.FAMILIES`, `_benchmark._robust.SYSTEMS`,
+`_inputs.INPUTS`, `_disturbance.NOISES`);
 `tests/test_names.py` holds each list equal to its registry.
 """
 
@@ -33,6 +34,24 @@ EFFECTS = (
 
 # the loop's noise model, considered beside the effects
 NOISE_MODEL = "colored_noise"
+
+# input designs of a sweep: name: one-line summary (`InputDesign.summary`)
+INPUTS = {
+    "uniform": "independent samples uniform in (-A, A) (the paper's, A = 2)",
+    "gaussian": "independent zero-mean Gaussian samples (std)",
+    "multisine": "random-phase multisine on lines in a band (fractions of Nyquist)",
+    "multilevel": "random levels held between random switches (levels = 2: binary)",
+    "file": "random segments of a column of a CSV/Parquet record",
+}
+
+# output noise kinds of a sweep: name: one-line summary (`Disturbance.summary`)
+NOISES = {
+    "white": "white Gaussian noise (the paper's)",
+    "ar": "stationary AR noise (real poles)",
+    "arma": "stationary ARMA noise (real poles and zeros)",
+    "student_t": "white Student-t noise (dof > 2 degrees of freedom)",
+    "outliers": "Gaussian noise plus outliers (fraction, size in stds)",
+}
 
 # system families of a sweep
 FAMILIES = ("random",)

@@ -166,15 +166,21 @@ def _simulate(params: CascadeParams, u: Float[Array, " T"]) -> Float[Array, " T"
 
 
 def add_noise(
-    key: PRNGKeyArray, y: Float[Array, " T"], snr: float | Float[Array, ""]
+    key: PRNGKeyArray, y: Float[Array, " T"], snr: float | Float[Array, ""], noise=None
 ) -> Float[Array, " T"]:
-    """Add white Gaussian noise at the paper's SNR = sqrt(var(y) / var(e)) (an amplitude ratio).
+    """Add output noise at the paper's SNR = sqrt(var(y) / var(e)) (an amplitude ratio).
 
-    `snr = inf` adds nothing. The backlash state is not affected: noise is measurement noise.
+    `noise` draws the noise's shape, `noise(key, T, dtype)` with unit variance (a
+    `_disturbance.Disturbance`: coloured, heavy-tailed, with outliers); without it,
+    white Gaussian noise, the paper's. It is scaled by `std(y) / snr`, so the SNR is
+    that of the noise as added. `snr = inf` adds nothing. The backlash state is not
+    affected: noise is measurement noise.
     """
     snr = jnp.asarray(snr, y.dtype)
     sigma = jnp.std(y) / snr
-    return y + sigma * jax.random.normal(key, y.shape, y.dtype)
+    if noise is None:
+        return y + sigma * jax.random.normal(key, y.shape, y.dtype)
+    return y + sigma * noise(key, y.shape[0], y.dtype)
 
 
 def uniform_input(key: PRNGKeyArray, n: int, amplitude: float = 2.0, dtype=None):

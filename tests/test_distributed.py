@@ -172,3 +172,19 @@ def test_throughput_runner_on_a_tiny_workload(tmp_path):
     table = pd.read_csv(out)
     assert list(table["mode"]) == ["in-process", "dask"] and list(table["workers"]) == [0, 1]
     assert (table["realisations_per_s"] > 0).all() and table["speedup"].iloc[0] == 1.0
+
+
+def test_multisine_input_and_ar_noise_on_the_cluster_equal_the_in_process_run(cluster):
+    spec = tiny_spec(
+        realisations=6,
+        snr=[25.0],
+        input="multisine",
+        input_settings={"band": [0.0, 0.8]},
+        noise="ar",
+        noise_settings={"poles": [0.9]},
+    )
+    expected = without_timing(run(spec, progress=False))
+    remote = dataclasses.replace(spec, scheduler=cluster.scheduler_address)
+    table = without_timing(run(remote, progress=False))
+    assert set(table["noise"]) == {"ar"} and set(table["input"]) == {"multisine"}
+    pd.testing.assert_frame_equal(table, expected, check_exact=True)

@@ -12,12 +12,13 @@ PACKAGE = pathlib.Path(__file__).parents[1] / "jaxcascade"
 LAYERS = [
     {"_model", "_status", "_metrics", "_batching", "_version", "_linalg", "_compile", "_names"},
     {"_validate"},
-    {"_simulate", "_prior", "_examples", "_changing", "_noise_filter"},
+    {"_simulate", "_prior", "_examples", "_changing", "_disturbance", "_noise_filter"},
     {"_sensitivity"},
     {"_regression", "_normal_equations", "_fused", "_online"},
     {"_estimator", "_efficiency"},
     {
         "_data",
+        "_inputs",
         "_arx",
         "_hysteresis",
         "_diagnose",

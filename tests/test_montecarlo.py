@@ -5,6 +5,7 @@ estimator. Every spec shares N = 300 and chunk size 3 where it can, so most test
 one compilation.
 """
 
+import json
 import os
 import pathlib
 import signal
@@ -223,7 +224,12 @@ def test_bad_specs_fail_before_any_file_is_written(tmp_path, capsys, extra, mess
             'estimators = ["literal", "robust"]',
         ),
         ("example = 1\nn = 300\ninput = 3.0\n", "[input] amplitude = 3.0"),
-        ('example = 1\nn = 300\ninput = "uniform"\n', '[input] distribution = "uniform"'),
+        ('example = 1\nn = 300\ninput = "uniform"\n', '[input] kind = "uniform"'),
+        ('example = 1\nn = 300\nnoise = "ar"\n', '[noise] kind = "ar"'),
+        ('example = 1\nn = 300\n[input]\nkind = "sine"\n', "Unknown input kind 'sine'"),
+        ('example = 1\nn = 300\n[noise]\nkind = "ar"\npole = 0.9\n', "Unknown field 'pole'"),
+        ('example = 1\nn = 300\n[noise]\nkind = "ar"\npoles = [1.0]\n', "every pole"),
+        ('example = 1\nn = 300\n[input]\nkind = "gaussian"\namplitude = 2\n', "'amplitude'"),
     ],
 )
 def test_bad_spec_files(tmp_path, capsys, text, message):
@@ -368,3 +374,101 @@ def test_plots_are_written(tmp_path):
     want += ["demo_convergence_rate.png", "demo_distributions.png", "demo_efficiency.png"]
     assert names == sorted(want)
     assert all(pathlib.Path(p).stat().st_size > 10_000 for p in paths)
+
+
+# ---- input designs and noise kinds -------------------------------------------------------
+
+COLOURED = """
+example = 1
+n = 300
+snr = 25
+realisations = 6
+seed = 0
+chunk_size = 3
+[input]
+kind = "multisine"
+band = [0.0, 0.8]
+[noise]
+kind = "ar"
+poles = [0.9]
+"""
+
+
+def test_multisine_input_with_ar_noise_runs_and_resumes_to_an_identical_table(
+    tmp_path, capsys, monkeypatch
+):
+    import jaxcascade._montecarlo._run as run_module
+
+    path = tmp_path / "coloured.toml"
+    path.write_text(COLOURED)
+    reference = tmp_path / "reference.parquet"
+    assert main(["sweep", str(path), "--out", str(reference)]) == 0
+    assert "input: multisine" in capsys.readouterr().out
+    expected = without_timing(pd.read_parquet(reference))
+    assert set(expected["input"]) == {"multisine"} and set(expected["noise"]) == {"ar"}
+    np.testing.assert_allclose(expected["input_rms"], 2 / np.sqrt(3), rtol=1e-12)
+    meta = read_metadata(reference)
+    assert meta["spec"]["noise"] == {"kind": "ar", "poles": [0.9]}
+    assert meta["spec"]["input"]["kind"] == "multisine"
+
+    # a run that dies after its first chunk, then resumes from the chunk on disk
+    out = tmp_path / "crashed.parquet"
+    calls = []
+
+    def dying(spec, cell, indices):
+        if calls:
+            raise KeyboardInterrupt
+        calls.append(indices)
+        return run_chunk(spec, cell, indices)
+
+    monkeypatch.setattr(run_module, "run_chunk", dying)
+    assert main(["sweep", str(path), "--out", str(out)]) == 130
+    assert len(list((tmp_path / "crashed.parquet.partial").glob("chunk-*"))) == 1
+    monkeypatch.undo()
+    capsys.readouterr()
+    # other noise settings may not continue it: the noise is part of the identity
+    assert main(["sweep", str(path), "--noise", "ar:poles = [0.5]", "--out", str(out)]) == 2
+    assert "different spec" in capsys.readouterr().err
+    assert main(["sweep", str(path), "--out", str(out)]) == 0
+    pd.testing.assert_frame_equal(without_timing(pd.read_parquet(out)), expected, check_exact=True)
+
+    # the same records under the command line's options instead of the file's tables
+    options = tmp_path / "options.parquet"
+    argv = ["sweep", "--example", "1", "--n", "300", "--realisations", "6", "--chunk-size", "3"]
+    kinds = ["--input-kind", "multisine:band = [0.0, 0.8]", "--noise", "ar:poles = [0.9]"]
+    assert main([*argv, *kinds, "--out", str(options)]) == 0
+    table = without_timing(pd.read_parquet(options))
+    pd.testing.assert_frame_equal(table, expected, check_exact=True)
+
+
+def test_noise_and_input_enter_the_cell_keys_and_the_papers_keys_stay():
+    from jaxcascade._montecarlo._engine import cell_identity
+
+    paper = small_spec()
+    cell = paper.cells()[0]
+    # the identity text written before input designs and noise kinds existed
+    values = {
+        "DL1": "-0x1.ccccccccccccdp-1", "DR1": "0x1.0000000000000p+0",
+        "ML1": "0x1.6666666666666p-1", "ML2": "-0x1.999999999999ap-1",
+        "MR1": "0x1.3333333333333p+0", "MR2": "-0x1.6666666666666p+0",
+        "a2": "0x1.3333333333333p-3", "b1": "-0x1.999999999999ap-3",
+        "b2": "0x1.6666666666666p-2", "cL": "0x1.999999999999ap-3",
+        "cR": "0x1.3333333333333p-2", "mR": "0x1.3333333333333p+0",
+    }  # fmt: skip
+    before = {
+        "amplitude": "0x1.0000000000000p+1", "input": "uniform", "n": 300,
+        "orders": "2,2,2,2", "snr": "0x1.9000000000000p+4", "values": values,
+    }  # fmt: skip
+    assert cell_identity(paper, cell) == json.dumps(before, sort_keys=True)
+    identities = {
+        cell_identity(small_spec(**changes), cell)
+        for changes in (
+            {},
+            {"noise": "ar", "noise_settings": {"poles": [0.9]}},
+            {"noise": "ar", "noise_settings": {"poles": [0.5]}},
+            {"noise": "student_t"},
+            {"input": "multisine"},
+            {"input": "multisine", "input_settings": {"band": [0, 0.5]}},
+        )
+    }
+    assert len(identities) == 6

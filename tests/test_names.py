@@ -6,8 +6,10 @@ import re
 
 from jaxcascade import _names
 from jaxcascade._benchmark._robust import SYSTEMS
+from jaxcascade._disturbance import NOISES
 from jaxcascade._effects import EFFECTS
 from jaxcascade._estimator import BUILTIN, ESTIMATORS
+from jaxcascade._inputs import INPUTS
 from jaxcascade._montecarlo._spec import FAMILIES
 from jaxcascade._noise import ARNoise
 
@@ -21,6 +23,8 @@ def test_names_equal_the_registries():
     assert _names.NOISE_MODEL == ARNoise.name
     assert _names.FAMILIES == tuple(FAMILIES)
     assert _names.BENCH_SYSTEMS == tuple(SYSTEMS)
+    assert _names.INPUTS == {name: cls.summary for name, cls in INPUTS.items()}
+    assert _names.NOISES == {name: cls.summary for name, cls in NOISES.items()}
 
 
 def test_readme_lists_the_loops_effects():

@@ -93,6 +93,37 @@ def estimator_help() -> str:
     )
 
 
+def kind_with_settings(option: str):
+    """An argparse type: `KIND` or `KIND:SETTINGS`, the settings a TOML inline table's
+    body (`ar:poles = [0.9, 0.5]`, `outliers:fraction = 0.02, size = 10`); returns
+    `(kind, {setting: value})`."""
+
+    def parse(text: str):
+        import tomllib
+
+        kind, _, body = text.partition(":")
+        kind = kind.strip()
+        if not kind:
+            raise CLIError(f"{option} takes KIND or KIND:SETTINGS, got {text!r}.")
+        if not body.strip():
+            return kind, {}
+        try:
+            settings = tomllib.loads(f"settings = {{{body}}}")["settings"]
+        except tomllib.TOMLDecodeError:
+            raise CLIError(
+                f"{option}: the settings {body.strip()!r} are not a TOML inline table's "
+                "body (e.g. poles = [0.9], dof = 3)."
+            ) from None
+        return kind, settings
+
+    return parse
+
+
+def kind_help(names: dict) -> str:
+    """One entry per registered kind, for `--input-kind` and `--noise` help texts."""
+    return "; ".join(f"{name}: {summary}" for name, summary in names.items())
+
+
 def examples(*lines: str) -> str:
     """An `epilog` of example command lines, to end a command's --help."""
     return "examples:\n" + "\n".join(f"  {line}" for line in lines)

@@ -4,12 +4,15 @@ from __future__ import annotations
 
 import pathlib
 import sys
+import warnings
 
-from .._names import FAMILIES
+from .._names import FAMILIES, INPUTS, NOISES
 from ._common import (
     CLIError,
     estimator_help,
     examples,
+    kind_help,
+    kind_with_settings,
     name_list,
     number_list,
     parse_orders,
@@ -20,7 +23,7 @@ from ._common import (
 def spec_from_args(args):
     """The spec (`Spec`) of a `sweep` command line: a TOML file, overridden by the
     options given."""
-    from .._montecarlo._spec import Spec, read_toml
+    from .._montecarlo._spec import InputRangeWarning, Spec, read_toml
 
     data = {}
     if args.spec is not None:
@@ -52,10 +55,28 @@ def spec_from_args(args):
     ):
         if value is not None:
             data[field] = value
+    if args.input_kind is not None:  # a kind replaces the file's whole [input] table
+        kind, settings = args.input_kind
+        data["input"] = {"kind": kind, **settings}
+    if args.noise is not None:
+        kind, settings = args.noise
+        data["noise"] = {"kind": kind, **settings}
     if args.amplitude is not None:
-        data.setdefault("input", {})
-        data["input"] = {**data["input"], "amplitude": args.amplitude}
-    return Spec.from_dict(data)
+        table = data.get("input", {})
+        table = {"kind": table} if isinstance(table, str) else dict(table)
+        table.pop("rms", None)
+        data["input"] = {**table, "amplitude": args.amplitude}
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", InputRangeWarning)
+        spec = Spec.from_dict(data)
+    for warning in caught:  # one line each, as the errors
+        if issubclass(warning.category, InputRangeWarning):
+            print(f"jaxcascade: warning: {warning.message}", file=sys.stderr)
+        else:
+            warnings.warn_explicit(
+                warning.message, warning.category, warning.filename, warning.lineno
+            )
+    return spec
 
 
 def check_baseline(spec, baseline, path) -> None:
@@ -99,6 +120,19 @@ def _print_cells(summary) -> None:
     print(cells[columns].to_string(index=False, float_format=lambda v: f"{v:.4g}"))
 
 
+def _experiment_line(spec, summary) -> str:
+    """The input design and noise in one line, with the records' rms and crest factor."""
+    settings = ", ".join(f"{k} = {v}" for k, v in spec.input_settings.items())
+    noise = ", ".join(f"{k} = {list(v) if isinstance(v, tuple) else v}"
+                      for k, v in spec.noise_settings.items())  # fmt: skip
+    first = summary.iloc[0]
+    return (
+        f"input: {spec.input} ({settings}); records' rms {first['input_rms_mean']:.4g}, "
+        f"crest factor median {first['input_crest_median']:.3g}; noise: {spec.noise}"
+        + (f" ({noise})" if noise else "")
+    )
+
+
 def sweep(args) -> int:
     # imported here, not at the top: `--help` answers without importing JAX
     from .._montecarlo._run import run, summary_path
@@ -139,6 +173,8 @@ def sweep(args) -> int:
     summary = summarise(table)
     summary.to_csv(summary_path(out), index=False)
     _print_cells(summary)
+    if spec.input != "uniform" or spec.noise != "white":
+        print(_experiment_line(spec, summary))
     print(f"written: {out}, {summary_path(out)}")
     if args.plots:
         stem = out.name.removesuffix(".parquet")
@@ -177,6 +213,8 @@ def add_parser(subparsers) -> None:
             "--overwrite",
             "jaxcascade sweep --example 1 --snr 10,25,50 --n 1000,4000 --realisations 100 "
             "--out results/ex1.parquet",
+            "jaxcascade sweep --example 1 --input-kind multisine --noise 'ar:poles = [0.9]' "
+            "--realisations 100 --estimator robust --out runs/ar.parquet",
             "jaxcascade sweep spec.toml --out results/b.parquet --compare results/a.summary.csv",
         ),
     )
@@ -202,7 +240,28 @@ def add_parser(subparsers) -> None:
     parser.add_argument(
         "--estimator", type=name_list, help=f"e.g. literal or literal,robust ({estimator_help()})"
     )
-    parser.add_argument("--amplitude", type=float, help="input uniform in (-A, A) (default 2)")
+    parser.add_argument(
+        "--input-kind",
+        metavar="KIND[:SETTINGS]",
+        type=kind_with_settings("--input-kind"),
+        help="the input design, replacing a spec file's [input] table; SETTINGS as in "
+        "TOML, e.g. 'multisine:band = [0, 0.5], rms = 1' (default uniform; each kind "
+        "scaled by amplitude or rms, default the paper's input power): " + kind_help(INPUTS),
+    )
+    parser.add_argument(
+        "--amplitude",
+        type=float,
+        help="the input's amplitude: uniform in (-A, A) (default 2), or the bound of "
+        "another kind that has one",
+    )
+    parser.add_argument(
+        "--noise",
+        metavar="KIND[:SETTINGS]",
+        type=kind_with_settings("--noise"),
+        help="the output noise, replacing a spec file's [noise] table, e.g. "
+        "'ar:poles = [0.9]', 'student_t:dof = 3', 'outliers:fraction = 0.02, size = 10' "
+        "(default white; scaled to the SNR as added): " + kind_help(NOISES),
+    )
     parser.add_argument("--chunk-size", type=int, help="realisations per compiled batch")
     parser.add_argument(
         "--scheduler",

@@ -1,10 +1,16 @@
 """The Monte-Carlo engine: keys, one realisation, and chunks of realisations as one
 compiled, batched call.
 
-One realisation draws an input record (uniform in `(-A, A)`), simulates the cascade,
-adds output noise at the cell's SNR, computes the record's output-error Cramér-Rao bound
-(`_efficiency.crlb`), fits it with the cell's estimator, and scores the estimate on a
-fresh record (fresh input and fresh noise): validation
+One realisation draws an input record from the spec's input design (`_inputs`; the
+paper's is uniform in `(-A, A)`), simulates the cascade, adds the spec's output noise
+(`_disturbance`; the paper's is white) at the cell's SNR, computes the record's
+Cramér-Rao bound of that noise (`_efficiency.crlb`: for `ar` and `arma` noise the
+coloured bound, the prediction-error Jacobian whitened; for white, Student-t and
+outlier noise the bound of Gaussian noise of the same variance, the second-order bound
+that least squares and `pem` can attain, `_efficiency.information_factor` saying how
+much lower the heavy-tailed density's own is), fits it with the cell's estimator (given
+the design's `input_range`), and scores the estimate on a fresh record (fresh input and
+fresh noise of the same kinds): validation
 `NRMSE = rms(y_val - simulate(estimate, u_val)) / std(y_val)`, `inf` when the estimate
 is inadmissible (so a table never holds a NaN score).
 
@@ -14,7 +20,9 @@ worker). Chunks are padded to `spec.chunk_size`, so a cell compiles once.
 
 **Keys.** Realisation `i` of a cell uses `fold_in(cell_key, i)`, where `cell_key` is
 `PRNGKey(seed)` folded with a 64-bit hash of the cell's data identity: the true
-parameters and orders, the input distribution, N and SNR. Nothing else enters: not the
+parameters and orders, the input design, the noise, N and SNR (for the paper's uniform
+input and white noise the text is the one written before input designs and noise kinds
+existed, so the records of those sweeps are unchanged). Nothing else enters: not the
 chunking, not the order of execution, and not the estimator, so every estimator of a
 sweep sees the same records (common random numbers: differences between estimators
 are not Monte-Carlo noise). An estimator with random starts gets its own key folded
@@ -43,19 +51,20 @@ import hashlib
 import json
 import time
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pandas as pd
 
 from .._compile import compiler_options
-from .._efficiency import crlb
+from .._efficiency import crlb, noise_bound_options
 from .._estimator import estimator, is_host
 from .._metrics import nrmse
 from .._model import CascadeParams, is_admissible
 from .._normal_equations import resolve
 from .._prior import random_system
-from .._simulate import add_noise, simulate, uniform_input
+from .._simulate import add_noise, simulate
 from ._spec import Cell, Spec
 from ._tables import realisation_frame
 
@@ -73,17 +82,31 @@ def cell_identity(spec: Spec, cell: Cell) -> str:
         system = {
             "values": {name: float(value).hex() for name, value in spec.true_values().items()}
         }
-    return json.dumps(
-        {
-            "orders": str(spec.orders),
-            **system,
-            "input": spec.input,
-            "amplitude": float(spec.amplitude).hex(),
-            "n": int(cell.n),
-            "snr": float(cell.snr).hex(),
-        },
-        sort_keys=True,
-    )
+    identity = {
+        "orders": str(spec.orders),
+        **system,
+        "input": spec.input,
+        "amplitude": float(spec.amplitude).hex(),
+        "n": int(cell.n),
+        "snr": float(cell.snr).hex(),
+    }
+    if spec.input != "uniform":
+        identity["input_settings"] = _exact(spec.input_design().identity())
+    if spec.noise != "white":
+        identity["noise"] = spec.noise
+        identity["noise_settings"] = _exact(dict(spec.noise_settings))
+    return json.dumps(identity, sort_keys=True)
+
+
+def _exact(value):
+    """Settings as canonical JSON values, floats in exact hex form."""
+    if isinstance(value, dict):
+        return {k: _exact(v) for k, v in sorted(value.items())}
+    if isinstance(value, list | tuple):
+        return [_exact(v) for v in value]
+    if isinstance(value, float):
+        return value.hex()
+    return value
 
 
 def cell_key(spec: Spec, cell: Cell):
@@ -98,22 +121,30 @@ def _system_tag(family: str) -> np.uint32:
     return np.uint32(_hash_words(f"system:{family}")[0])
 
 
-def _draw(cell_key, index, truth_vector, snr, *, orders, n, amplitude, family):
-    """One realisation's records: input, noisy output, the record's Cramér-Rao bound, and
-    the fresh validation record (module docstring). With a `family`, `truth_vector` only
-    gives the dtype: the true system is drawn from the family's prior with a key folded
-    from the realisation key."""
+def _draw(
+    cell_key, index, truth_vector, snr, design_arrays, *, orders, n, design_static, noise, family
+):
+    """One realisation's records: the input from the design, the noisy output, the
+    record's Cramér-Rao bound of the cell's noise, and the fresh validation record of the
+    same design and noise (module docstring). With a `family`, `truth_vector` only gives
+    the dtype: the true system is drawn from the family's prior with a key folded from
+    the realisation key. The input design arrives in two parts: its arrays (a measured
+    record) as an argument, the rest closed over (`eqx.partition`), so no large constant
+    is compiled into the program."""
     dtype = truth_vector.dtype
+    design = eqx.combine(design_arrays, design_static)
     key = jax.random.fold_in(cell_key, index)
     if family is not None:
         system_key = jax.random.fold_in(key, _system_tag(family))
-        truth_vector = random_system(system_key, orders, amplitude, dtype).to_vector()
+        truth_vector = random_system(system_key, orders, design.bound, dtype).to_vector()
     truth = CascadeParams.from_vector(truth_vector, orders, check=False)
     key_u, key_e, key_u_val, key_e_val = jax.random.split(key, 4)
-    u = uniform_input(key_u, n, amplitude, dtype)
-    y = add_noise(key_e, simulate(truth, u), snr)
-    u_val = uniform_input(key_u_val, n, amplitude, dtype)
-    y_val = add_noise(key_e_val, simulate(truth, u_val), snr)
+    u = design(key_u, n, dtype)
+    y = add_noise(key_e, simulate(truth, u), snr, noise)
+    u_val = design(key_u_val, n, dtype)
+    y_val = add_noise(key_e_val, simulate(truth, u_val), snr, noise)
+    low, high = design.input_range(u)
+    input_rms = jnp.sqrt(jnp.mean(u**2))
     return {
         "key": key,
         "u": u,
@@ -121,15 +152,21 @@ def _draw(cell_key, index, truth_vector, snr, *, orders, n, amplitude, family):
         "u_val": u_val,
         "y_val": y_val,
         "truth": truth_vector,
-        # the record's own Cramér-Rao bound (noise-free: 0), for the efficiency columns
-        "crlb": crlb(truth, u, snr=snr),
+        "input_low": jnp.asarray(low, dtype),
+        "input_high": jnp.asarray(high, dtype),
+        # the record's own Cramér-Rao bound of its noise (noise-free: 0): coloured for
+        # ar/arma noise, the Gaussian one of the noise's variance for white, Student-t
+        # and outliers (`_efficiency`)
+        "crlb": crlb(truth, u, snr=snr, **noise_bound_options(noise)),
+        "input_rms": input_rms,
+        "input_crest": jnp.max(jnp.abs(u)) / input_rms,
     }
 
 
-def _score(estimate, truth_vector, u_val, y_val, *, orders, amplitude):
+def _score(estimate, truth_vector, u_val, y_val, input_range, *, orders):
     """Validation NRMSE of an estimate on the fresh record and whether it is admissible."""
     admissible = is_admissible(
-        CascadeParams.from_vector(estimate, orders, check=False), -amplitude, amplitude
+        CascadeParams.from_vector(estimate, orders, check=False), *input_range
     )
     # An inadmissible estimate (unstable, unsorted breakpoints, ...) is not simulated:
     # its score is inf, and the truth stands in so no NaN is ever computed.
@@ -155,27 +192,52 @@ def _outputs(drawn, solution, estimate, error, admissible):
         "admissible": admissible,
         "truth": drawn["truth"],
         "crlb": drawn["crlb"],
+        "input_rms": drawn["input_rms"],
+        "input_crest": drawn["input_crest"],
     }
 
 
 def _realisation(
-    cell_key, index, truth_vector, snr, *, orders, n, amplitude, fit, fit_key_tag, family
+    cell_key,
+    index,
+    truth_vector,
+    snr,
+    design_arrays,
+    *,
+    orders,
+    n,
+    design_static,
+    noise,
+    fit,
+    fit_key_tag,
+    family,
 ):
     """One record: input, noisy output, fit, validation on a fresh record (`_draw`, the
     estimator, `_score`)."""
     drawn = _draw(
-        cell_key, index, truth_vector, snr, orders=orders, n=n, amplitude=amplitude, family=family
+        cell_key,
+        index,
+        truth_vector,
+        snr,
+        design_arrays,
+        orders=orders,
+        n=n,
+        design_static=design_static,
+        noise=noise,
+        family=family,
     )
+    design = eqx.combine(design_arrays, design_static)
+    input_range = design.input_range(drawn["u"])
     solution = fit(
         drawn["u"],
         drawn["y"],
         orders,
         key=jax.random.fold_in(drawn["key"], fit_key_tag),
-        input_range=(-amplitude, amplitude),
+        input_range=input_range,
     )
     estimate = solution.params.to_vector().astype(drawn["truth"].dtype)
     error, admissible = _score(
-        estimate, drawn["truth"], drawn["u_val"], drawn["y_val"], orders=orders, amplitude=amplitude
+        estimate, drawn["truth"], drawn["u_val"], drawn["y_val"], input_range, orders=orders
     )
     return _outputs(drawn, solution, estimate, error, admissible)
 
@@ -184,21 +246,43 @@ def _is_typed(key) -> bool:
     return jnp.issubdtype(key.dtype, jax.dtypes.prng_key)
 
 
+def _split(design):
+    """An input design as (arrays, the rest): the arrays travel as arguments."""
+    return eqx.partition(design, eqx.is_array)
+
+
 @functools.lru_cache(maxsize=64)
-def _compiled(orders, n, amplitude, name, settings, batched, family=None):
-    """The jitted (optionally vmapped) realisation function of one cell shape."""
+def _compiled(orders, n, experiment, name, settings, batched, family=None):
+    """The jitted (optionally vmapped) realisation function of one cell shape;
+    `experiment` is the spec's `_experiment` (input and noise, hashable)."""
+    spec_input, input_settings, spec_noise, noise_settings = experiment
+    from .._disturbance import disturbance
+    from .._inputs import input_design
+
+    design = input_design(spec_input, **dict(input_settings))
     one = functools.partial(
         _realisation,
         orders=orders,
         n=n,
-        amplitude=amplitude,
+        design_static=_split(design)[1],
+        noise=disturbance(spec_noise, **dict(noise_settings)),
         fit=estimator(name, **dict(settings)),
         fit_key_tag=np.uint32(_hash_words(f"estimator:{name}")[0]),
         family=family,
     )
     if batched:
-        one = jax.vmap(one, in_axes=(None, 0, None, None))
+        one = jax.vmap(one, in_axes=(None, 0, None, None, None))
     return jax.jit(one, compiler_options=compiler_options())
+
+
+def _experiment(spec: Spec) -> tuple:
+    """The input design and noise of `spec` as a hashable tuple (a cache key)."""
+    return (
+        spec.input,
+        tuple(sorted(spec.input_settings.items())),
+        spec.noise,
+        tuple(sorted(spec.noise_settings.items())),
+    )
 
 
 def _arguments(spec: Spec, cell: Cell, dtype=None):
@@ -207,13 +291,20 @@ def _arguments(spec: Spec, cell: Cell, dtype=None):
         truth = jnp.zeros((len(spec.orders.names),), dtype)
     else:
         truth = spec.truth(dtype).to_vector()
-    return cell_key(spec, cell), truth, jnp.asarray(cell.snr, dtype)
+    arrays = _split(spec.input_design())[0]
+    return cell_key(spec, cell), truth, jnp.asarray(cell.snr, dtype), arrays
 
 
 def _function(spec: Spec, cell: Cell, batched: bool):
     settings = spec.estimator_settings(cell.estimator)
     return _compiled(
-        spec.orders, cell.n, spec.amplitude, cell.estimator, settings, batched, spec.family
+        spec.orders,
+        cell.n,
+        _experiment(spec),
+        cell.estimator,
+        settings,
+        batched,
+        spec.family,
     )
 
 
@@ -225,11 +316,11 @@ _MAX_EXECUTABLES = 64
 
 def _executable(spec: Spec, cell: Cell, arguments) -> tuple:
     """(compiled batched function, seconds spent compiling it now: 0 if cached)."""
-    key, indices, truth, snr = arguments
+    key, indices, truth, snr, arrays = arguments
     cache_key = (
         spec.orders,
         cell.n,
-        spec.amplitude,
+        _experiment(spec),
         cell.estimator,
         spec.estimator_settings(cell.estimator),
         spec.family,
@@ -250,13 +341,25 @@ def _executable(spec: Spec, cell: Cell, arguments) -> tuple:
 
 
 @functools.lru_cache(maxsize=16)
-def _host_programs(orders, n, amplitude, family):
+def _host_programs(orders, n, experiment, family):
     """The batched draw and score of a cell shape whose estimator runs on the host."""
-    draw = functools.partial(_draw, orders=orders, n=n, amplitude=amplitude, family=family)
-    score = functools.partial(_score, orders=orders, amplitude=amplitude)
+    spec_input, input_settings, spec_noise, noise_settings = experiment
+    from .._disturbance import disturbance
+    from .._inputs import input_design
+
+    design = input_design(spec_input, **dict(input_settings))
+    draw = functools.partial(
+        _draw,
+        orders=orders,
+        n=n,
+        design_static=_split(design)[1],
+        noise=disturbance(spec_noise, **dict(noise_settings)),
+        family=family,
+    )
+    score = functools.partial(_score, orders=orders)
     options = compiler_options()
     return (
-        jax.jit(jax.vmap(draw, in_axes=(None, 0, None, None)), compiler_options=options),
+        jax.jit(jax.vmap(draw, in_axes=(None, 0, None, None, None)), compiler_options=options),
         jax.jit(jax.vmap(score), compiler_options=options),
     )
 
@@ -266,19 +369,23 @@ def _host_chunk(spec: Spec, cell: Cell, fit, indices: np.ndarray, size: int) -> 
     drawn and the estimates scored in compiled, batched calls (padded to `size`, so a
     cell compiles once), the fits run one record after another on the host, each timed
     (`fit_seconds` per row)."""
-    draw, score = _host_programs(spec.orders, cell.n, spec.amplitude, spec.family)
+    experiment = _experiment(spec)
+    draw, score = _host_programs(spec.orders, cell.n, experiment, spec.family)
     padded = np.concatenate([indices, np.full(size - indices.size, indices[-1])])
-    key, truth, snr = _arguments(spec, cell)
-    arguments = (key, jnp.asarray(padded.astype(np.uint32)), truth, snr)
-    cache_key = ("host", spec.orders, cell.n, spec.amplitude, spec.family, size, str(truth.dtype))
+    key, truth, snr, arrays = _arguments(spec, cell)
+    arguments = (key, jnp.asarray(padded.astype(np.uint32)), truth, snr, arrays)
+    cache_key = ("host", spec.orders, cell.n, experiment, spec.family, size, str(truth.dtype))
     compile_seconds = 0.0
     if cache_key not in _EXECUTABLES:
         start = time.perf_counter()
         shapes = jax.eval_shape(draw, *arguments)
         estimate = jax.ShapeDtypeStruct(shapes["truth"].shape, truth.dtype)
+        bounds = (shapes["input_low"], shapes["input_high"])
         _EXECUTABLES[cache_key] = (
             draw.lower(*arguments).compile(),
-            score.lower(estimate, shapes["truth"], shapes["u_val"], shapes["y_val"]).compile(),
+            score.lower(
+                estimate, shapes["truth"], shapes["u_val"], shapes["y_val"], bounds
+            ).compile(),
         )
         compile_seconds = time.perf_counter() - start
     draw, score = _EXECUTABLES[cache_key]
@@ -297,8 +404,15 @@ def _host_chunk(spec: Spec, cell: Cell, fit, indices: np.ndarray, size: int) -> 
         estimates[i] = np.asarray(solution.params.to_vector(), np.float64)
         for name in fields:
             fields[name][i] = np.asarray(getattr(solution, name))
+    bounds = (drawn["input_low"], drawn["input_high"])
     errors, admissible = jax.device_get(
-        score(jnp.asarray(estimates, truth.dtype), drawn["truth"], drawn["u_val"], drawn["y_val"])
+        score(
+            jnp.asarray(estimates, truth.dtype),
+            drawn["truth"],
+            drawn["u_val"],
+            drawn["y_val"],
+            bounds,
+        )
     )
     key_data = drawn["key"] if drawn["key"].ndim == 2 else np.asarray(drawn["key"])
     return {
@@ -309,6 +423,8 @@ def _host_chunk(spec: Spec, cell: Cell, fit, indices: np.ndarray, size: int) -> 
         "admissible": np.asarray(admissible)[:count],
         "truth": drawn["truth"][:count],
         "crlb": drawn["crlb"][:count],
+        "input_rms": drawn["input_rms"][:count],
+        "input_crest": drawn["input_crest"][:count],
         "fit_seconds": seconds,
         "compile_seconds": compile_seconds,
     }
@@ -324,9 +440,9 @@ def records(spec: Spec, cell: Cell, indices) -> dict[str, np.ndarray]:
     their validation records (`u_val`, `y_val`): the same for every estimator of a
     sweep, for checking a table's rows against direct fits."""
     indices = np.asarray(indices, np.int64)
-    draw, _ = _host_programs(spec.orders, cell.n, spec.amplitude, spec.family)
-    key, truth, snr = _arguments(spec, cell)
-    drawn = jax.device_get(draw(key, jnp.asarray(indices.astype(np.uint32)), truth, snr))
+    draw, _ = _host_programs(spec.orders, cell.n, _experiment(spec), spec.family)
+    key, truth, snr, arrays = _arguments(spec, cell)
+    drawn = jax.device_get(draw(key, jnp.asarray(indices.astype(np.uint32)), truth, snr, arrays))
     return {name: np.asarray(drawn[name]) for name in ("u", "y", "u_val", "y_val")}
 
 
@@ -352,8 +468,8 @@ def run_chunk(spec: Spec, cell: Cell, indices) -> pd.DataFrame:
         frame.attrs["normal_equations"] = normal_equations_backend(spec)
         return frame
     padded = np.concatenate([indices, np.full(size - indices.size, indices[-1])])
-    key, truth, snr = _arguments(spec, cell)
-    arguments = (key, jnp.asarray(padded.astype(np.uint32)), truth, snr)
+    key, truth, snr, arrays = _arguments(spec, cell)
+    arguments = (key, jnp.asarray(padded.astype(np.uint32)), truth, snr, arrays)
     compiled, compile_seconds = _executable(spec, cell, arguments)
     start = time.perf_counter()
     outputs = jax.device_get(compiled(*arguments))
@@ -380,8 +496,9 @@ def run_realisation(spec: Spec, cell: Cell, index: int) -> dict:
         out = _host_chunk(spec, cell, _fit(spec, cell), np.asarray([index], np.int64), 1)
         out["key"] = _key_to_uint64(out["key"])
         return {k: np.asarray(v)[0] if np.ndim(v) else np.asarray(v) for k, v in out.items()}
-    key, truth, snr = _arguments(spec, cell)
-    out = jax.device_get(_function(spec, cell, batched=False)(key, np.uint32(index), truth, snr))
+    key, truth, snr, arrays = _arguments(spec, cell)
+    function = _function(spec, cell, batched=False)
+    out = jax.device_get(function(key, np.uint32(index), truth, snr, arrays))
     out = {k: np.asarray(v) for k, v in out.items()}
     out["key"] = _key_to_uint64(out["key"][None])[0]
     return out
@@ -395,13 +512,13 @@ def _key_to_uint64(words) -> np.ndarray:
 def chunk_memory(spec: Spec, cell: Cell, chunk_size: int | None = None) -> dict[str, int]:
     """XLA's buffer sizes in bytes for one compiled chunk: temp, argument, output, total."""
     size = chunk_size or spec.chunk_size
-    key, truth, snr = _arguments(spec, cell)
+    key, truth, snr, arrays = _arguments(spec, cell)
     indices = jnp.zeros((size,), jnp.uint32)
     if is_host(_fit(spec, cell)):  # the compiled part is the draw (and the small score)
-        program = _host_programs(spec.orders, cell.n, spec.amplitude, spec.family)[0]
+        program = _host_programs(spec.orders, cell.n, _experiment(spec), spec.family)[0]
     else:
         program = _function(spec, cell, batched=True)
-    compiled = program.lower(key, indices, truth, snr).compile()
+    compiled = program.lower(key, indices, truth, snr, arrays).compile()
     analysis = compiled.memory_analysis()
     sizes = {
         "temp": int(analysis.temp_size_in_bytes),

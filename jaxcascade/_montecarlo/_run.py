@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import pathlib
 import shutil
+import warnings
 
 import jax.numpy as jnp
 import numpy as np
@@ -28,12 +29,31 @@ def _partial_folder(out: pathlib.Path) -> pathlib.Path:
 
 def _identity(spec: Spec, dtype) -> dict:
     # What must match for a resumed run to continue the same experiment. The chunk size
-    # may differ: it never changes a result.
-    return {"spec": spec.to_dict(chunk_size=False), "dtype": str(np.dtype(dtype))}
+    # may differ: it never changes a result. A file input adds its contents' hash.
+    identity = {"spec": spec.to_dict(chunk_size=False), "dtype": str(np.dtype(dtype))}
+    design = spec.input_design()
+    if "sha256" in design.identity():
+        identity["input_sha256"] = design.identity()["sha256"]
+    return identity
+
+
+def _normalised(identity: dict) -> dict:
+    """A stored identity in today's layout: its spec read back through `Spec`, so that
+    one written before input designs (`distribution = "uniform"`, no noise) matches."""
+    if not isinstance(identity, dict) or not isinstance(identity.get("spec"), dict):
+        return identity
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            spec = Spec.from_dict(identity["spec"]).to_dict(chunk_size=False)
+    except (ValueError, TypeError):
+        return identity
+    return {**identity, "spec": spec}
 
 
 def _check_same(stored: dict, expected: dict, where) -> None:
-    if json.loads(json.dumps(stored)) != json.loads(json.dumps(expected)):
+    stored = _normalised(json.loads(json.dumps(stored)))
+    if stored != json.loads(json.dumps(expected)):
         raise ValueError(
             f"'{where}' was written by a different spec or dtype; use another --out "
             "or delete it to start afresh."
@@ -132,9 +152,10 @@ def run(
                 "it, or delete it."
             )
         meta = read_metadata(out)
-        _check_same(
-            {"spec": _without_chunk(meta.get("spec")), "dtype": meta.get("dtype")}, identity, out
-        )
+        stored = {"spec": _without_chunk(meta.get("spec")), "dtype": meta.get("dtype")}
+        if "input_sha256" in meta:
+            stored["input_sha256"] = meta["input_sha256"]
+        _check_same(stored, identity, out)
         return pd.read_parquet(out)
     else:
         folder.mkdir(parents=True, exist_ok=True)
@@ -155,7 +176,10 @@ def run(
     table = _ordered(spec, _done(folder))
     if len(table) != total:  # never write a table with realisations missing
         raise RuntimeError(f"'{folder}' holds {len(table)} of {total} realisations.")
-    write_table(table, out, run_metadata(spec, dtype, _backends(folder), command))
+    metadata = run_metadata(spec, dtype, _backends(folder), command)
+    if "input_sha256" in identity:
+        metadata["input_sha256"] = identity["input_sha256"]
+    write_table(table, out, metadata)
     shutil.rmtree(folder)
     return pd.read_parquet(out)
 

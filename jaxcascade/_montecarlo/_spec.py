@@ -1,10 +1,12 @@
 """Experiment specification of a Monte-Carlo sweep: a dataclass and its TOML form.
 
 A spec names one system (a paper example, explicit parameters and orders, or a family of
-random systems with one true system drawn per realisation), the input
-distribution, and a grid of sample sizes x SNRs x estimators; each grid cell runs
-`realisations` independent records. Everything is validated at construction, so a bad
-spec fails with one sentence before any work starts.
+random systems with one true system drawn per realisation), the input design
+(`_inputs`), the output noise (`_disturbance`), and a grid of sample sizes x SNRs x
+estimators; each grid cell runs `realisations` independent records. Everything is
+validated at construction, so a bad spec fails with one sentence before any work
+starts; a true breakpoint outside the interval the input covers is a warning
+(`InputRangeWarning`: that segment cannot be identified).
 
 TOML layout (every key optional except the system):
 
@@ -18,8 +20,16 @@ TOML layout (every key optional except the system):
     scheduler = "tcp://HOST:8786"    # optional: run the chunks on a Dask cluster
 
     [input]
-    distribution = "uniform"         # u uniform in (-amplitude, amplitude)
-    amplitude = 2.0
+    kind = "uniform"                 # uniform, gaussian, multisine, multilevel, file
+    amplitude = 2.0                  # or rms = 1.1547; `distribution` = old name of kind
+    # gaussian: std | multisine: band = [0.0, 0.5], lines = 0 | multilevel: levels = 0,
+    # switch_probability = 0.5 | file: path, column, segment = "random" or "whole",
+    # decimate = 1, normalise = "record" or "segment"
+
+    [noise]
+    kind = "white"                   # white, ar, arma, student_t, outliers
+    # ar: poles = [0.9] | arma: poles, zeros | student_t: dof = 3 |
+    # outliers: fraction = 0.02, size = 10 (in the Gaussian part's stds)
 
     [system]                         # instead of `example`
     orders = "2,2,2,2"               # optional, inferred from the names
@@ -37,19 +47,22 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
 import pathlib
 import tomllib
+import warnings
 from collections.abc import Mapping
 from typing import Any, NamedTuple
 
 import jax.numpy as jnp
 
+from .._disturbance import NOISES, Disturbance, disturbance
 from .._estimator import estimator
 from .._examples import EXAMPLES
+from .._inputs import INPUTS, InputDesign, input_design
 from .._model import CascadeParams, Orders
 
-INPUT_DISTRIBUTIONS = ("uniform",)
+INPUT_KINDS = tuple(INPUTS)
+NOISE_KINDS = tuple(NOISES)
 # Families of systems: every realisation draws its own true system from a prior.
 FAMILIES = ("random",)
 # The issue-4 benchmark family: N = 3000, SNR 30 unless the spec says otherwise.
@@ -59,6 +72,7 @@ _TOP_LEVEL = (
     "example",
     "system",
     "input",
+    "noise",
     "n",
     "snr",
     "realisations",
@@ -68,6 +82,10 @@ _TOP_LEVEL = (
     "chunk_size",
     "scheduler",
 )
+
+
+class InputRangeWarning(UserWarning):
+    """A true breakpoint lies outside the interval the spec's input covers."""
 
 
 class Cell(NamedTuple):
@@ -98,13 +116,24 @@ def _as_tuple(value, kind, name) -> tuple:
     return tuple(out)
 
 
-def _freeze(value):
+def _freeze(value, what: str = "Estimator"):
     # Settings are static under jit, so they must be hashable: TOML arrays become tuples.
     if isinstance(value, list | tuple):
-        return tuple(_freeze(v) for v in value)
+        return tuple(_freeze(v, what) for v in value)
     if isinstance(value, bool | int | float | str):
         return value
-    raise ValueError(f"Estimator settings must be numbers, strings or arrays, got {value!r}.")
+    raise ValueError(f"{what} settings must be numbers, strings or arrays, got {value!r}.")
+
+
+def _frozen_table(settings: Mapping[str, Any]) -> dict[str, Any]:
+    return {key: _freeze(value) for key, value in sorted(settings.items())}
+
+
+def _listed(table: Mapping[str, Any]) -> dict[str, Any]:
+    def plain(value):
+        return [plain(v) for v in value] if isinstance(value, tuple) else value
+
+    return {key: plain(value) for key, value in table.items()}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -118,7 +147,13 @@ class Spec:
       `u_max = amplitude`): realisation `i` draws its own true system from a key folded
       from its realisation key, so every estimator of a sweep sees the same system and
       record; `orders` default `2,2,2,2`, `n` 3000 and `snr` 30.
-    - `input`, `amplitude`: input distribution, `"uniform"` in `(-amplitude, amplitude)`.
+    - `input`, `input_settings`: the input design's kind (`_inputs.INPUTS`) and its
+      settings (scale: `amplitude` or `rms`); `amplitude` is a shorthand for
+      `input_settings["amplitude"]`, and after construction holds the design's `bound`
+      (its amplitude, or that of the uniform input of the same power). The settings are
+      stored resolved (defaults filled in), so a spec records what it drew.
+    - `noise`, `noise_settings`: the output noise's kind (`_disturbance.NOISES`) and its
+      settings, stored resolved; the SNR is `sqrt(var y / var e)` of the noise as added.
     - `n`, `snr`: sample sizes and SNRs (`sqrt(var y / var e)`, `inf` = noise-free);
       default the example's own (N, 25).
     - `realisations`: records per grid cell; `seed`: the sweep's PRNG seed.
@@ -136,7 +171,10 @@ class Spec:
     family: str | None = None
     orders: Orders | str | None = None
     input: str = "uniform"
-    amplitude: float = 2.0
+    amplitude: float | None = None
+    input_settings: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    noise: str = "white"
+    noise_settings: Mapping[str, Any] = dataclasses.field(default_factory=dict)
     n: tuple[int, ...] | None = None
     snr: tuple[float, ...] | None = None
     realisations: int = 100
@@ -190,16 +228,7 @@ class Spec:
         set_(self, "snr", _as_tuple(self.snr, float, "snr"))
         set_(self, "estimators", _as_tuple(self.estimators, str, "estimators"))
 
-        if self.input not in INPUT_DISTRIBUTIONS:
-            raise ValueError(
-                f"Unknown input distribution {self.input!r}; "
-                f"known: {', '.join(INPUT_DISTRIBUTIONS)}."
-            )
-        if not (isinstance(self.amplitude, int | float) and 0 < self.amplitude < math.inf):
-            raise ValueError(
-                f"Input amplitude must be positive and finite, got {self.amplitude!r}."
-            )
-        set_(self, "amplitude", float(self.amplitude))
+        self._resolve_input_and_noise()
         low = self.orders.min_samples
         for n in self.n:
             if n < low:
@@ -207,6 +236,9 @@ class Spec:
                     f"N = {n} is too small for orders {self.orders}: a record needs at "
                     f"least {low} samples ({Orders.SAMPLES_PER_PARAMETER} per parameter)."
                 )
+        design = self.input_design()
+        for n in self.n:
+            design.check(n)
         for snr in self.snr:
             if not snr > 0:
                 raise ValueError(f"SNR must be positive (inf = noise-free), got {snr}.")
@@ -244,6 +276,67 @@ class Spec:
             estimator(name, **frozen)  # unknown or ill-typed settings: one sentence
             settings[name] = frozen
         set_(self, "settings", settings)
+        self._warn_breakpoints(design)
+
+    def _resolve_input_and_noise(self) -> None:
+        set_ = object.__setattr__
+        if not isinstance(self.input_settings, Mapping):
+            raise ValueError("Spec field 'input_settings' must map setting names to values.")
+        if not isinstance(self.noise_settings, Mapping):
+            raise ValueError("Spec field 'noise_settings' must map setting names to values.")
+        if self.input not in INPUTS:
+            raise ValueError(
+                f"Unknown input kind {self.input!r}; known kinds: {', '.join(INPUT_KINDS)}."
+            )
+        table = {k: _freeze(v, "Input") for k, v in self.input_settings.items()}
+        scaled = {"amplitude", "rms", "std"} & set(table)
+        if self.amplitude is not None and not scaled:
+            table["amplitude"] = self.amplitude
+        design = input_design(self.input, **table)
+        # `amplitude` beside a scaled table (dataclasses.replace of a spec) must agree
+        if self.amplitude is not None and scaled and self.amplitude != design.bound:
+            raise ValueError(
+                f"Input amplitude {self.amplitude!r} disagrees with the input's settings "
+                f"{dict(table)}; give the scale once."
+            )
+        set_(self, "input_settings", _frozen_table(design.settings()))
+        set_(self, "amplitude", float(design.bound))
+        if self.noise not in NOISES:
+            raise ValueError(
+                f"Unknown noise kind {self.noise!r}; known kinds: {', '.join(NOISE_KINDS)}."
+            )
+        noise = disturbance(
+            self.noise, **{k: _freeze(v, "Noise") for k, v in self.noise_settings.items()}
+        )
+        set_(self, "noise_settings", _frozen_table(noise.settings()))
+
+    def _warn_breakpoints(self, design: InputDesign) -> None:
+        if self.family is not None:  # the prior draws breakpoints inside the input's bound
+            return
+        values = self.true_values()
+        names = [n for n in self.orders.names if n.startswith(("DR", "DL"))]
+        for n in self.n:
+            low, high = design.span(n)
+            outside = [
+                f"{name} = {values[name]:g}" for name in names if not low <= values[name] <= high
+            ]
+            if outside:
+                warnings.warn(
+                    f"The true breakpoint(s) {', '.join(outside)} lie outside the interval "
+                    f"[{low:.3g}, {high:.3g}] that the {self.input} input covers at N = {n}: "
+                    "the segment beyond cannot be identified; raise the input's amplitude.",
+                    InputRangeWarning,
+                    stacklevel=4,
+                )
+                return
+
+    def input_design(self) -> InputDesign:
+        """The input design of every realisation (`_inputs`); a file is read once."""
+        return input_design(self.input, **dict(self.input_settings))
+
+    def disturbance(self) -> Disturbance:
+        """The output noise of every realisation (`_disturbance`)."""
+        return disturbance(self.noise, **dict(self.noise_settings))
 
     # ---- derived ---------------------------------------------------------------------
 
@@ -297,7 +390,8 @@ class Spec:
             out["system"] = {"family": self.family, "orders": str(self.orders)}
         else:
             out["system"] = {"orders": str(self.orders), "params": dict(self.params)}
-        out["input"] = {"distribution": self.input, "amplitude": self.amplitude}
+        out["input"] = {"kind": self.input, **_listed(self.input_settings)}
+        out["noise"] = {"kind": self.noise, **_listed(self.noise_settings)}
         out["n"] = list(self.n)
         out["snr"] = list(self.snr)
         out["realisations"] = self.realisations
@@ -351,9 +445,22 @@ class Spec:
                 kwargs["family"] = system["family"]
             kwargs["orders"] = system.get("orders")
         if "input" in data:
-            table = _table(data["input"], "input", ("distribution", "amplitude"))
-            kwargs["input"] = table.get("distribution", "uniform")
-            kwargs["amplitude"] = table.get("amplitude", 2.0)
+            table = _table(data["input"], "input", None)
+            kind = table.pop("kind", None)
+            alias = table.pop("distribution", None)  # the old name of `kind`
+            if kind is not None and alias is not None and kind != alias:
+                raise ValueError(
+                    "[input] gives kind and distribution (its old name) differently; "
+                    "give kind only."
+                )
+            kwargs["input"] = kind or alias or "uniform"
+            _known(table, "input", kwargs["input"], INPUTS)
+            kwargs["input_settings"] = table
+        if "noise" in data:
+            table = _table(data["noise"], "noise", None)
+            kwargs["noise"] = table.pop("kind", "white")
+            _known(table, "noise", kwargs["noise"], NOISES)
+            kwargs["noise_settings"] = table
         if "estimator" in data:
             kwargs["settings"] = _table(data["estimator"], "estimator", None)
         return cls(**kwargs)
@@ -376,9 +483,9 @@ def _meant(name: str, value) -> str:
                 f"the estimators write estimators = [{listed}]"
             )
         return " of settings per estimator ([estimator.robust] n_starts = 8)"
-    if name == "input":
-        key = "distribution" if isinstance(value, str) else "amplitude"
-        return f"; did you mean [input] {key} = {shown}?"
+    if name in ("input", "noise"):
+        key = "kind" if isinstance(value, str) or name == "noise" else "amplitude"
+        return f"; did you mean [{name}] {key} = {shown}?"
     if name == "system":
         return f'; did you mean [system] params = {{...}} or system = "random", not {shown}?'
     return ""
@@ -395,6 +502,26 @@ def read_toml(path) -> dict:
             return tomllib.load(file)
     except tomllib.TOMLDecodeError as error:
         raise ValueError(f"Spec file '{path}' is not valid TOML: {error}.") from None
+
+
+def _known(table: dict, name: str, kind, registry) -> None:
+    """An unknown `[input]` / `[noise]` key is named with the kind's known settings."""
+    if not isinstance(kind, str) or kind not in registry:
+        return  # the spec names the unknown kind itself
+    if name == "input":
+        from .._inputs import known_settings
+
+        known = known_settings(kind)
+    else:
+        known = [
+            f for f in registry[kind].__dataclass_fields__ if not (kind == "ar" and f == "zeros")
+        ]
+    unknown = [key for key in table if key not in known]
+    if unknown:
+        raise ValueError(
+            f"Unknown field {unknown[0]!r} in [{name}] for kind {kind!r}; known fields: "
+            f"kind, {', '.join(sorted(known))}."
+        )
 
 
 def _table(value, name, allowed) -> dict:

@@ -1,7 +1,8 @@
 """Result tables of Monte-Carlo sweeps (pandas): per realisation, per cell, comparisons.
 
 **Realisation table**: one row per realisation with the spec fields (`system`,
-`orders`, `input`, `amplitude`, `n`, `snr`, `estimator`, `seed`), `realisation` (its
+`orders`, `input` (the design's kind), `amplitude` (`Spec.amplitude`: the design's
+bound), `noise` (the noise's kind), `n`, `snr`, `estimator`, `seed`), `realisation` (its
 index in the cell) and `key` (its PRNG key data as one uint64, enough to rerun it),
 `status` (a `Status` name), `iterations`, `cost` (the estimator's final cost),
 `nrmse` (validation NRMSE on a fresh record; `inf` for an inadmissible estimate),
@@ -11,10 +12,14 @@ statement about the algorithm, not the estimate), `cycle_amplitude` (with status
 `cycled`, the largest spread of one parameter over the cycle; 0 otherwise),
 `robust_path` (`Solution.path` by name: `only` for a one-path estimator, `adaptive` or
 `multistart` for robust), one column
-per parameter with the estimate, `crlb_<name>` with the record's own output-error
-Cramér-Rao bound on its standard deviation (`_efficiency.crlb`; 0 noise-free),
+per parameter with the estimate, `crlb_<name>` with the record's own Cramér-Rao bound
+on its standard deviation for the cell's noise (`_efficiency.crlb`: coloured for `ar`
+and `arma` noise, the Gaussian bound of the noise's variance for white, Student-t and
+outlier noise; 0 noise-free),
 `true_<name>` with the
-true value (the row's own for a family of systems), and the timing columns
+true value (the row's own for a family of systems), `input_rms` and `input_crest`
+(the estimation record's root mean square and crest factor `max|u| / rms`), and the
+timing columns
 `fit_seconds` (compute seconds per fit of its chunk, compilation excluded; a host
 function's own time on the row's record) and
 `compile_seconds` (seconds its chunk spent compiling, 0 when cached); the timing
@@ -33,7 +38,8 @@ the `cycled` realisations (NaN without any). Errors are taken against each row's
 so for a family of systems
 `bias` is the mean of `estimate - truth`, `std` the standard deviation of that error
 and `true`/`mean` the means of the truth and the estimates over the rows used; for a
-fixed system these are the usual moments of the estimate. Timing per cell:
+fixed system these are the usual moments of the estimate. The input per cell:
+`input_rms_mean` and `input_crest_median`. Timing per cell:
 `fit_seconds_median`, `fit_seconds_mean` and `compile_seconds` (the largest compile
 time of a chunk: one compilation). Each statistic has its Monte-Carlo standard error (`*_se`):
 mean and bias `s / sqrt(m)`; std `s / sqrt(2 (m - 1))` (normal approximation);
@@ -100,6 +106,7 @@ def realisation_frame(spec, cell, indices, outputs: dict) -> pd.DataFrame:
         "orders": [str(spec.orders)] * count,
         "input": [spec.input] * count,
         "amplitude": np.full(count, spec.amplitude),
+        "noise": [spec.noise] * count,
         "n": np.full(count, cell.n, dtype=np.int64),
         "snr": np.full(count, cell.snr, dtype=np.float64),
         "estimator": [cell.estimator] * count,
@@ -124,6 +131,9 @@ def realisation_frame(spec, cell, indices, outputs: dict) -> pd.DataFrame:
         bounds = np.asarray(outputs["crlb"], dtype=np.float64).reshape(count, len(names))
         for j, name in enumerate(names):
             columns[crlb_column(name)] = bounds[:, j]
+    for name in ("input_rms", "input_crest"):
+        if name in outputs:
+            columns[name] = np.asarray(outputs[name], dtype=np.float64)
     for name in TIMING_COLUMNS:
         # one figure per chunk (batched estimators), or one per row (host functions)
         values = np.asarray(outputs.get(name, np.nan), dtype=np.float64)
@@ -168,6 +178,7 @@ def summarise(table: pd.DataFrame) -> pd.DataFrame:
             "recovered_rate": recovered,
             "recovered_rate_se": recovered_se,
             "nrmse_median": float(np.median(group["nrmse"])) if count else float("nan"),
+            **_input_statistics(group),
             **_cycles(group),
             **_timing(group),
             **{f"count_{s.name}": int(np.sum(status == s.name)) for s in Status},
@@ -242,6 +253,17 @@ def _efficiency(group: pd.DataFrame, name: str, std: float, m: int) -> dict[str,
         relative = np.sqrt(2 / (m - 1) + (bound_variance_se / bound_variance) ** 2)
         out.update(efficiency=efficiency, efficiency_se=efficiency * relative)
     return out
+
+
+def _input_statistics(group: pd.DataFrame) -> dict[str, float]:
+    """The estimation records' mean rms and median crest factor (NaN in tables written
+    before the input designs)."""
+    if "input_rms" not in group or not len(group):
+        return {"input_rms_mean": np.nan, "input_crest_median": np.nan}
+    return {
+        "input_rms_mean": float(np.mean(group["input_rms"].to_numpy(np.float64))),
+        "input_crest_median": float(np.median(group["input_crest"].to_numpy(np.float64))),
+    }
 
 
 def _cycles(group: pd.DataFrame) -> dict[str, float]:
