@@ -96,9 +96,7 @@ def test_host_function_sweep_rows_equal_direct_calls(registry):
     jc.register_estimator("scipy_oe", example.scipy_output_error)
     spec = _spec("scipy_oe", max_nfev=50)
     table = run(spec, progress=False)
-    direct = _direct(
-        spec, lambda u, y: example.scipy_output_error(u, y, spec.orders, max_nfev=50)
-    )
+    direct = _direct(spec, lambda u, y: example.scipy_output_error(u, y, spec.orders, max_nfev=50))
     np.testing.assert_array_equal(table[list(spec.orders.names)].to_numpy(), direct)
     assert (table["status"] == "converged").all()
     assert (table["fit_seconds"] > 0).all() and table["fit_seconds"].nunique() == 3
