@@ -74,8 +74,14 @@ inputs() {  # issue 24: input designs at equal power (reads the shared damper re
         --out results/input_design
 }
 
+noise() {  # issue 24: pem under AR(1) noise drawn by the script; the noise study
+    python benchmarks/pem_coloured.py --realisations 200 --estimators pem,robust \
+        --out results/pem_coloured
+    python benchmarks/noise_study.py --realisations 200 --out results/noise_study
+}
+
 steps=("$@")
-[ ${#steps[@]} -gt 0 ] || steps=(bench bench_robust distributed robust sweeps literal efficiency loop reproduce recursive inputs)
+[ ${#steps[@]} -gt 0 ] || steps=(bench bench_robust distributed robust sweeps literal efficiency loop reproduce recursive inputs noise)
 for step in "${steps[@]}"; do
     echo "== $step"
     "$step"

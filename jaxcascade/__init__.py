@@ -15,17 +15,23 @@ Inputs and noise of an experiment
 Estimators (each fits one record and returns a `Solution` with a `Status`)
     `Literal` / `voros` (the paper's iteration, eqs. 19-28), `Robust` / `robust`
     (output-error least squares from the literal estimate, multi-start fallback),
-    `refine`; the registry `ESTIMATORS` and `estimator` (`estimator(name, **settings)`);
-    `Estimator`, the interface; `initial_guess`, `regression` (the key-term regression,
-    eqs. 15-18); `status_names` (codes to names); `solution_table` (a `Solution` of
-    any batch shape, e.g. after `jax.vmap`, as a pandas DataFrame, one row per record).
+    `refine`; `Pem` / `pem` / `pem_fit` (prediction error with an AR noise model, for
+    coloured output noise); the registry `ESTIMATORS` and `estimator` (`estimator(name,
+    **settings)`); `register_estimator` (a user's own: an `Estimator` class or a host
+    function `fn(u, y, orders) -> vector`; also the entry-point group
+    `jaxcascade.estimators`); `Estimator`, the interface; `initial_guess`,
+    `regression` (the key-term regression, eqs. 15-18); `status_names` (codes to
+    names); `solution_table` (a `Solution` of any batch shape, e.g. after `jax.vmap`, as
+    a pandas DataFrame, one row per record).
     Records are checked before any work: one 1-D record of real, finite numbers (lists
     and NumPy arrays are converted), `u` and `y` of equal length, at least
     `Orders.min_samples` samples; anything else is a `ValueError` or `TypeError` saying
     what to change.
 Efficiency
     `jacobian` (of the simulated output), `fisher_information`, `crlb` (the Cramer-Rao
-    bound on each parameter's standard deviation), `standard_errors` (of a fit).
+    bound on each parameter's standard deviation; white or coloured noise: `poles`,
+    `zeros`), `information_factor` (how much lower a heavy-tailed density's exact bound
+    is), `standard_errors` (of a fit).
 Monte-Carlo sweeps
     `Spec`, `Cell`, `run`, `run_chunk`, `run_realisation`, `cell_key`, `chunk_memory`;
     `summarise`, `compare`, `read_summary`, `read_metadata`; `plot_sweep`.
@@ -69,6 +75,7 @@ _MODULES = {
     "._efficiency": (
         "crlb",
         "fisher_information",
+        "information_factor",
         "jacobian",
         "standard_errors",
     ),
@@ -83,12 +90,18 @@ _MODULES = {
         "Estimator",
         "Solution",
         "estimator",
+        "register_estimator",
         "solution_table",
     ),
     "._estimator._literal": (
         "Literal",
         "initial_guess",
         "voros",
+    ),
+    "._estimator._pem": (
+        "Pem",
+        "pem",
+        "pem_fit",
     ),
     "._estimator._refine": ("refine",),
     "._estimator._robust": (

@@ -19,6 +19,26 @@ per-record bounds is the tighter of the two valid bounds (by Jensen's inequality
 matrix inverse, `E[F^-1] >= (E F)^-1`); for long records they agree (`F_k / N`
 concentrates). `fisher_information` accepts a batch of records for the other one.
 
+**Coloured noise** (`poles`, `zeros`: `e = C(q)/A(q) w`, `w` white Gaussian,
+`_noise_filter`): the log-likelihood is that of the one-step-ahead prediction errors
+`w = A(q)/C(q) (y - simulate(theta, u))`, so the information is the whitened Jacobian's,
+
+    F = J_w^T J_w / sigma_w^2,    J_w = A(q)/C(q) J,    sigma_w^2 = sigma^2 / sum h_k^2,
+
+with `sigma` the standard deviation of the noise as added (the SNR's) and `h` the
+impulse response of `C/A`. The noise model's own coefficients, estimated with theta,
+do not change theta's bound: their information is block-diagonal with theta's when the
+noise is independent of the input (Ljung 1999, sec. 9.3). Output error under coloured
+noise does not reach this bound; a prediction-error estimator (`pem`) does.
+
+**Heavy tails.** `crlb` is the bound of Gaussian noise with the noise's variance and
+spectrum: the smallest covariance attainable from second-order statistics, which least
+squares and prediction error with a quadratic criterion attain. The exact bound of a
+non-Gaussian density is lower: its information per sample is `information_factor /
+sigma_w^2` (`information_factor`: Student-t with `nu` degrees of freedom `nu (nu + 1) /
+((nu - 2)(nu + 3))`, 2 at `nu = 3`), so its bound on a standard deviation is
+`crlb / sqrt(information_factor)`. Sweep tables report the Gaussian (second-order) one.
+
 **Measured records** (`standard_errors`): the same information at the estimate, with
 `sigma^2` estimated from the residual (`sum r^2 / (N - P)`), and, when a noise model
 whitens the residual, the whitened Jacobian (generalised least squares): the estimated
@@ -36,6 +56,7 @@ from jaxtyping import Array, Float
 
 from . import _linalg
 from ._model import CascadeParams
+from ._noise_filter import coefficients, variance_ratio, whiten
 from ._simulate import simulate
 
 
@@ -58,30 +79,114 @@ def _sigma(params, u, snr, sigma):
     return jnp.std(simulate(params, u)) / jnp.asarray(snr, u.dtype)
 
 
-def fisher_information(
-    params: CascadeParams, u: Float[Array, "... T"], *, snr=None, sigma=None
-) -> Float[Array, "P P"]:
-    """Fisher information `J^T J / sigma^2` of theta for the record(s) `u`; a batch of
-    records (leading axis) gives their average information. The noise level is
-    `sigma`, or `std(simulate(params, u)) / snr` (the paper's amplitude SNR)."""
-    if u.ndim == 2:
-        return jnp.mean(
-            jax.vmap(lambda one: fisher_information(params, one, snr=snr, sigma=sigma))(u), 0
-        )
+def _whitened(params, u, snr, sigma, poles, zeros):
+    """The whitened Jacobian `J_w` and the innovations' standard deviation `sigma_w`."""
     J = jacobian(params, u)
-    return J.T @ J / _sigma(params, u, snr, sigma) ** 2
+    sigma = _sigma(params, u, snr, sigma)
+    if not len(poles) and not len(zeros):
+        return J, sigma
+    c, d = coefficients(tuple(poles), tuple(zeros))
+    ratio = variance_ratio(jnp.asarray(c, u.dtype), jnp.asarray(d, u.dtype))
+    return whiten(J, c, d), sigma / jnp.sqrt(ratio)
 
 
-def crlb(params: CascadeParams, u: Float[Array, "... T"], *, snr=None, sigma=None):
+def fisher_information(
+    params: CascadeParams,
+    u: Float[Array, "... T"],
+    *,
+    snr=None,
+    sigma=None,
+    poles=(),
+    zeros=(),
+) -> Float[Array, "P P"]:
+    """Fisher information `J_w^T J_w / sigma_w^2` of theta for the record(s) `u`; a batch
+    of records (leading axis) gives their average information. The noise level is
+    `sigma`, or `std(simulate(params, u)) / snr` (the paper's amplitude SNR), the
+    standard deviation of the noise as added; `poles` and `zeros` (real, inside the unit
+    circle) make it coloured (module docstring); none: white."""
+    options = dict(snr=snr, sigma=sigma, poles=poles, zeros=zeros)
+    if u.ndim == 2:
+        return jnp.mean(jax.vmap(lambda one: fisher_information(params, one, **options))(u), 0)
+    J, sigma_w = _whitened(params, u, snr, sigma, poles, zeros)
+    return J.T @ J / sigma_w**2
+
+
+def crlb(
+    params: CascadeParams,
+    u: Float[Array, "... T"],
+    *,
+    snr=None,
+    sigma=None,
+    poles=(),
+    zeros=(),
+):
     """The Cramér-Rao bound on the standard deviation of every parameter (`Orders.names`
     order) for record `u`; with a batch of records, the average of the per-record bounds
     (module docstring). `inf` for a parameter the record does not determine (singular
-    information, e.g. a segment never visited), 0 noise-free. Traceable."""
+    information, e.g. a segment never visited), 0 noise-free. Coloured noise: `poles`,
+    `zeros` of `e = C(q)/A(q) w` (`fisher_information`); heavy tails: the Gaussian
+    bound of the same variance (module docstring, `information_factor`). Traceable."""
+    options = dict(snr=snr, sigma=sigma, poles=poles, zeros=zeros)
     if u.ndim == 2:
-        variances = jax.vmap(lambda one: crlb(params, one, snr=snr, sigma=sigma) ** 2)(u)
+        variances = jax.vmap(lambda one: crlb(params, one, **options) ** 2)(u)
         return jnp.sqrt(jnp.mean(variances, 0))
-    J = jacobian(params, u)
-    return _bound(J, _sigma(params, u, snr, sigma))
+    return _bound(*_whitened(params, u, snr, sigma, poles, zeros))
+
+
+def noise_bound_options(noise=None) -> dict:
+    """The keywords of `crlb` for a noise model: `poles` and `zeros` of linear noise (any
+    object with those attributes, e.g. the sweep's `ar` and `arma` noise kinds); none for
+    white or heavy-tailed noise, whose table bound is the Gaussian one of the noise's
+    variance (module docstring). Host side: `crlb(truth, u, snr=snr,
+    **noise_bound_options(noise))`."""
+    if noise is None:
+        return {}
+    return {
+        "poles": tuple(float(p) for p in getattr(noise, "poles", ())),
+        "zeros": tuple(float(z) for z in getattr(noise, "zeros", ())),
+    }
+
+
+def information_factor(kind: str = "gaussian", **settings) -> float:
+    """Fisher information of a noise density about its location, times its variance: 1
+    for Gaussian noise (the largest: every other density of that variance carries more),
+    `nu (nu + 1) / ((nu - 2)(nu + 3))` for Student-t with `nu > 2` degrees of freedom
+    (`dof`; 2 at `nu = 3`), and by numerical integration for Gaussian noise with
+    outliers (`fraction` of the samples shifted by +-`size` standard deviations of the
+    Gaussian part: `(1 - f) N(0, 1) + f/2 (N(size, 1) + N(-size, 1))`). The exact
+    Cramér-Rao bound of that noise is `crlb / sqrt(information_factor)` (module
+    docstring). Host side."""
+    import numpy as np
+
+    if kind == "gaussian":
+        return 1.0
+    if kind == "student_t":
+        nu = float(settings["dof"])
+        if not nu > 2:
+            raise ValueError(f"Student-t noise needs dof > 2 for a finite variance, got {nu}.")
+        return nu * (nu + 1) / ((nu - 2) * (nu + 3))
+    if kind == "outliers":
+        from scipy.integrate import quad
+
+        f, k = float(settings["fraction"]), float(settings["size"])
+
+        def parts(x):
+            phi = [np.exp(-0.5 * (x - m) ** 2) / np.sqrt(2 * np.pi) for m in (0.0, k, -k)]
+            p = (1 - f) * phi[0] + 0.5 * f * (phi[1] + phi[2])
+            dp = -(1 - f) * x * phi[0] - 0.5 * f * ((x - k) * phi[1] + (x + k) * phi[2])
+            return p, dp
+
+        def integrand(x):
+            p, dp = parts(x)
+            return dp**2 / p if p > 0 else 0.0
+
+        edges = [-np.inf, *sorted({-k, 0.0, k}), np.inf]  # one piece per bump
+        pieces = zip(edges[:-1], edges[1:], strict=True)
+        information = sum(quad(integrand, a, b, limit=400)[0] for a, b in pieces)
+        return information * (1 + f * k**2)
+    raise ValueError(
+        f"No information factor for noise {kind!r}; known: gaussian, student_t, outliers."
+    )
 
 
 def _bound(J, sigma):

@@ -11,6 +11,7 @@ live here as well as in their registries (`_estimator.ESTIMATORS`, `_effects.EFF
 ESTIMATORS = {
     "literal": "the paper's iteration (eqs. 19-28) from its initial values",
     "robust": "output-error Levenberg-Marquardt from the literal estimate, multi-start fallback",
+    "pem": "prediction error with an AR noise model (order by BIC), from the robust estimate",
     "recursive": "the key-term regression (eqs. 16-18) by recursive least squares with forgetting",
 }
 

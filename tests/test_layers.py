@@ -12,7 +12,7 @@ PACKAGE = pathlib.Path(__file__).parents[1] / "jaxcascade"
 LAYERS = [
     {"_model", "_status", "_metrics", "_batching", "_version", "_linalg", "_compile", "_names"},
     {"_validate"},
-    {"_simulate", "_prior", "_examples", "_changing", "_disturbance"},
+    {"_simulate", "_prior", "_examples", "_changing", "_disturbance", "_noise_filter"},
     {"_sensitivity"},
     {"_regression", "_normal_equations", "_fused", "_online"},
     {"_estimator", "_efficiency"},

@@ -1,5 +1,7 @@
 """Timing of the robust estimator's Monte-Carlo workload (`jaxcascade bench --estimator
-robust --system ...`) against a SciPy output-error multi-start.
+robust --system ...`) against a SciPy output-error multi-start; the same workload for
+any other registered estimator (`pem`, or a user's: `bench --estimator NAME`), batched
+and compiled for an `Estimator`, one record after another for a host function.
 
 Per realisation: draw a uniform input in (-2, 2), the system (a paper example, or for
 `random` a fresh draw from the prior, `_prior.py`), simulate, add output noise at the
@@ -56,17 +58,15 @@ def system_defaults(system: str) -> tuple[int, float]:
     return SYSTEMS[system][1:]
 
 
-def batched_fit(system: str, n: int, snr: float, settings: dict | None = None):
-    """The jitted batched workload `keys -> (estimates, truths, statuses, paths)`."""
+def _record(system: str, n: int, snr: float):
+    """`key -> (u, y, truth vector, fit key)`: one record of the workload."""
     import jax
 
-    from .._estimator._robust import robust
     from .._prior import random_system
     from .._simulate import measure, uniform_input
 
     number = SYSTEMS[system][0]
     orders = Orders()
-    settings = settings or {}
 
     def one(key):
         key_system, key_u, key_e, key_fit = jax.random.split(key, 4)
@@ -76,28 +76,76 @@ def batched_fit(system: str, n: int, snr: float, settings: dict | None = None):
         else:
             truth = get_example(number).params(u.dtype)
         y, _ = measure(key_e, truth, u, snr)
-        solution = robust(u, y, orders, key_fit, **settings)
-        return solution.params.to_vector(), truth.to_vector(), solution.status, solution.path
+        return u, y, truth.to_vector(), key_fit
+
+    return one
+
+
+def batched_fit(
+    system: str, n: int, snr: float, settings: dict | None = None, name: str = "robust"
+):
+    """The jitted batched workload `keys -> (estimates, truths, statuses, paths)` of the
+    registered estimator `name` (an `Estimator`) with `settings`."""
+    import jax
+
+    from .._estimator import estimator
+
+    fit = estimator(name, **(settings or {}))
+    record = _record(system, n, snr)
+
+    def one(key):
+        u, y, truth, key_fit = record(key)
+        solution = fit(u, y, Orders(), key=key_fit)
+        return solution.params.to_vector(), truth, solution.status, solution.path
 
     return jax.jit(jax.vmap(one), compiler_options=compiler_options())
 
 
-def run_jax(system, realisations=256, n=None, snr=None, repeats=1, seed=0, settings=None):
+def _host_run(system, name, settings, keys, n, snr):
+    """A host estimator over the workload's records, one after another: the outputs of
+    `batched_fit`, the compile time of the draw and the seconds of the fits."""
     import jax
 
+    from .._estimator import estimator
+
+    fit = estimator(name, **(settings or {}))
+    start = time.perf_counter()
+    draw = jax.jit(jax.vmap(_record(system, n, snr))).lower(keys).compile()
+    compile_s = time.perf_counter() - start
+    u, y, truths, _ = (np.asarray(a) for a in jax.device_get(draw(keys)))
+    solutions = []
+    start = time.perf_counter()
+    for i in range(len(keys)):
+        solutions.append(fit(u[i], y[i], Orders()))
+    seconds = time.perf_counter() - start
+    estimates = np.stack([np.asarray(s.params.to_vector()) for s in solutions])
+    statuses = np.array([int(s.status) for s in solutions])
+    paths = np.array([int(s.path) for s in solutions])
+    return (estimates, truths, statuses, paths), compile_s, seconds
+
+
+def run_jax(
+    system, realisations=256, n=None, snr=None, repeats=1, seed=0, settings=None, name="robust"
+):
+    import jax
+
+    from .._estimator import estimator, is_host
     from .._status import Status
 
     n_default, snr_default = system_defaults(system)
     n, snr = n or n_default, snr or snr_default
     keys = jax.random.split(jax.random.PRNGKey(seed), realisations)
-    start = time.perf_counter()
-    compiled = batched_fit(system, n, snr, settings).lower(keys).compile()
-    compile_s = time.perf_counter() - start
-    best = math.inf
-    for _ in range(max(repeats, 1)):
+    if is_host(estimator(name, **(settings or {}))):
+        out, compile_s, best = _host_run(system, name, settings, keys, n, snr)
+    else:
         start = time.perf_counter()
-        out = jax.block_until_ready(compiled(keys))
-        best = min(best, time.perf_counter() - start)
+        compiled = batched_fit(system, n, snr, settings, name).lower(keys).compile()
+        compile_s = time.perf_counter() - start
+        best = math.inf
+        for _ in range(max(repeats, 1)):
+            start = time.perf_counter()
+            out = jax.block_until_ready(compiled(keys))
+            best = min(best, time.perf_counter() - start)
     estimates, truths, statuses, paths = (np.asarray(a) for a in out)
     close = np.all(np.abs(estimates - truths) <= TOLERANCE, axis=1)
     return {
@@ -202,11 +250,18 @@ def run_baseline(system, realisations=8, n=None, snr=None, seed=0):
 
 
 def run_benchmark(
-    system="example1", realisations=256, baseline_realisations=8, n=None, repeats=1, seed=0
+    system="example1",
+    realisations=256,
+    baseline_realisations=8,
+    n=None,
+    repeats=1,
+    seed=0,
+    name="robust",
 ) -> dict:
-    """Every figure of the robust benchmark (the `SUMMARY_KEYS` and the details)."""
-    record = {"estimator": "robust", "system": system, "device": device_description()}
-    record.update(run_jax(system, realisations, n, repeats=repeats, seed=seed))
+    """Every figure of the benchmark of estimator `name` (the `SUMMARY_KEYS` and the
+    details)."""
+    record = {"estimator": name, "system": system, "device": device_description()}
+    record.update(run_jax(system, realisations, n, repeats=repeats, seed=seed, name=name))
     record.update(run_baseline(system, baseline_realisations, n, seed=seed))
     record["ratio"] = record["fits_per_s"] / record["baseline_fits_per_s"]
     return record

@@ -49,7 +49,7 @@ def _write_csv(record: dict, path: pathlib.Path) -> None:
 def _robust_report(r: dict) -> str:
     return "\n".join(
         [
-            f"workload: robust on {r['system']}, N = {r['n']}, SNR {r['snr']:g}, "
+            f"workload: {r['estimator']} on {r['system']}, N = {r['n']}, SNR {r['snr']:g}, "
             f"{r['realisations']} realisations",
             f"device: {r['device']}",
             f"jaxcascade: {r['fits_per_s']:.1f} fits/s ({r['run_s']:.2f} s per run; compile "
@@ -82,7 +82,7 @@ def run_robust_bench(args) -> int:
     if out is not None:
         writable_folder(out.parent, "--out")
     record = robust_bench.run_benchmark(
-        args.system, realisations, baseline, n, args.repeats, args.seed
+        args.system, realisations, baseline, n, args.repeats, args.seed, args.estimator
     )
     if out is not None:
         _write_csv(record, out)
@@ -149,9 +149,14 @@ def run_recursive_bench(args) -> int:
 def run_bench(args) -> int:
     # imported here, not at the top: `--help` answers without importing JAX
     from .._benchmark._timing import run_benchmark, summary
+    from .._estimator import lookup
     from .._examples import example as get_example
 
-    if args.estimator == "robust":
+    try:
+        lookup(args.estimator)  # a user's estimator: registered or an entry point
+    except ValueError as error:
+        raise CLIError(f"--estimator: {error}") from None
+    if args.estimator not in ("literal", "recursive"):
         return run_robust_bench(args)
     if args.estimator == "recursive":
         if args.system != "example1":
@@ -216,17 +221,19 @@ def add_parser(subparsers) -> None:
     parser.add_argument(
         "--estimator",
         default="literal",
-        choices=("literal", "robust", "recursive"),
+        metavar="NAME",
         help="literal (default): a fixed number of Vörös iterations; robust: `robust` at "
         "its defaults against a SciPy output-error multi-start; recursive: sample updates "
-        "per second of the recursive estimator against a NumPy loop",
+        "per second of the recursive estimator against a NumPy loop; pem, or a user's "
+        "registered estimator (register_estimator, entry point group "
+        "jaxcascade.estimators): the robust workload at its defaults",
     )
     parser.add_argument(
         "--system",
         default="example1",
         choices=BENCH_SYSTEMS,
-        help="robust: the system (example1 N 4000 SNR 25, example2 N 2000 SNR 25, random: "
-        "the random family, N 3000 SNR 30)",
+        help="robust, pem, a user's estimator: the system (example1 N 4000 SNR 25, "
+        "example2 N 2000 SNR 25, random: the random family, N 3000 SNR 30)",
     )
     parser.add_argument(
         "--realisations",

@@ -87,7 +87,10 @@ def estimator_help() -> str:
     """One line per registered estimator, for `--estimator` help texts."""
     from .._names import ESTIMATORS  # the names without importing JAX
 
-    return "; ".join(f"{name}: {summary}" for name, summary in ESTIMATORS.items())
+    return "; ".join(f"{name}: {summary}" for name, summary in ESTIMATORS.items()) + (
+        "; or a user's estimator, registered by its package's entry point (group "
+        "jaxcascade.estimators)"
+    )
 
 
 def kind_with_settings(option: str):

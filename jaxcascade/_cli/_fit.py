@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import math
 
-from .._names import ESTIMATORS
 from ._common import (
     CLIError,
     add_record_arguments,
@@ -152,7 +151,7 @@ def add_parser(subparsers) -> None:
     parser.add_argument(
         "--estimator",
         default="robust",
-        choices=tuple(ESTIMATORS),
+        metavar="NAME",
         help=f"default robust; {estimator_help()}",
     )
     parser.add_argument("--json", action="store_true", help="print a JSON result")

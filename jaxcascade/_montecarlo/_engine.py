@@ -4,8 +4,11 @@ compiled, batched call.
 One realisation draws an input record from the spec's input design (`_inputs`; the
 paper's is uniform in `(-A, A)`), simulates the cascade, adds the spec's output noise
 (`_disturbance`; the paper's is white) at the cell's SNR, computes the record's
-output-error Cramér-Rao bound (`_efficiency.crlb`, the bound of white Gaussian noise of
-the same variance whatever the noise kind), fits it with the cell's estimator (given
+Cramér-Rao bound of that noise (`_efficiency.crlb`: for `ar` and `arma` noise the
+coloured bound, the prediction-error Jacobian whitened; for white, Student-t and
+outlier noise the bound of Gaussian noise of the same variance, the second-order bound
+that least squares and `pem` can attain, `_efficiency.information_factor` saying how
+much lower the heavy-tailed density's own is), fits it with the cell's estimator (given
 the design's `input_range`), and scores the estimate on a fresh record (fresh input and
 fresh noise of the same kinds): validation
 `NRMSE = rms(y_val - simulate(estimate, u_val)) / std(y_val)`, `inf` when the estimate
@@ -55,8 +58,8 @@ import numpy as np
 import pandas as pd
 
 from .._compile import compiler_options
-from .._efficiency import crlb
-from .._estimator import estimator
+from .._efficiency import crlb, noise_bound_options
+from .._estimator import estimator, is_host
 from .._metrics import nrmse
 from .._model import CascadeParams, is_admissible
 from .._normal_equations import resolve
@@ -118,6 +121,82 @@ def _system_tag(family: str) -> np.uint32:
     return np.uint32(_hash_words(f"system:{family}")[0])
 
 
+def _draw(
+    cell_key, index, truth_vector, snr, design_arrays, *, orders, n, design_static, noise, family
+):
+    """One realisation's records: the input from the design, the noisy output, the
+    record's Cramér-Rao bound of the cell's noise, and the fresh validation record of the
+    same design and noise (module docstring). With a `family`, `truth_vector` only gives
+    the dtype: the true system is drawn from the family's prior with a key folded from
+    the realisation key. The input design arrives in two parts: its arrays (a measured
+    record) as an argument, the rest closed over (`eqx.partition`), so no large constant
+    is compiled into the program."""
+    dtype = truth_vector.dtype
+    design = eqx.combine(design_arrays, design_static)
+    key = jax.random.fold_in(cell_key, index)
+    if family is not None:
+        system_key = jax.random.fold_in(key, _system_tag(family))
+        truth_vector = random_system(system_key, orders, design.bound, dtype).to_vector()
+    truth = CascadeParams.from_vector(truth_vector, orders, check=False)
+    key_u, key_e, key_u_val, key_e_val = jax.random.split(key, 4)
+    u = design(key_u, n, dtype)
+    y = add_noise(key_e, simulate(truth, u), snr, noise)
+    u_val = design(key_u_val, n, dtype)
+    y_val = add_noise(key_e_val, simulate(truth, u_val), snr, noise)
+    low, high = design.input_range(u)
+    input_rms = jnp.sqrt(jnp.mean(u**2))
+    return {
+        "key": key,
+        "u": u,
+        "y": y,
+        "u_val": u_val,
+        "y_val": y_val,
+        "truth": truth_vector,
+        "input_low": jnp.asarray(low, dtype),
+        "input_high": jnp.asarray(high, dtype),
+        # the record's own Cramér-Rao bound of its noise (noise-free: 0): coloured for
+        # ar/arma noise, the Gaussian one of the noise's variance for white, Student-t
+        # and outliers (`_efficiency`)
+        "crlb": crlb(truth, u, snr=snr, **noise_bound_options(noise)),
+        "input_rms": input_rms,
+        "input_crest": jnp.max(jnp.abs(u)) / input_rms,
+    }
+
+
+def _score(estimate, truth_vector, u_val, y_val, input_range, *, orders):
+    """Validation NRMSE of an estimate on the fresh record and whether it is admissible."""
+    admissible = is_admissible(
+        CascadeParams.from_vector(estimate, orders, check=False), *input_range
+    )
+    # An inadmissible estimate (unstable, unsorted breakpoints, ...) is not simulated:
+    # its score is inf, and the truth stands in so no NaN is ever computed.
+    safe = CascadeParams.from_vector(
+        jnp.where(admissible, estimate, truth_vector), orders, check=False
+    )
+    error = nrmse(y_val, simulate(safe, u_val))
+    return jnp.where(admissible & jnp.isfinite(error), error, jnp.inf), admissible
+
+
+def _outputs(drawn, solution, estimate, error, admissible):
+    key = drawn["key"]
+    dtype = drawn["truth"].dtype
+    return {
+        "key": jax.random.key_data(key) if _is_typed(key) else key,
+        "estimate": estimate,
+        "status": jnp.asarray(solution.status).astype(jnp.int32),
+        "iterations": jnp.asarray(solution.iterations).astype(jnp.int32),
+        "cost": jnp.asarray(solution.cost, dtype),
+        "cycle_amplitude": jnp.asarray(solution.cycle_amplitude, dtype),
+        "path": jnp.asarray(solution.path).astype(jnp.int32),
+        "nrmse": error,
+        "admissible": admissible,
+        "truth": drawn["truth"],
+        "crlb": drawn["crlb"],
+        "input_rms": drawn["input_rms"],
+        "input_crest": drawn["input_crest"],
+    }
+
+
 def _realisation(
     cell_key,
     index,
@@ -133,63 +212,34 @@ def _realisation(
     fit_key_tag,
     family,
 ):
-    """One record: input, noisy output, fit, validation on a fresh record.
-
-    With a `family`, `truth_vector` only gives the dtype: the true system is drawn from
-    the family's prior with a key folded from the realisation key. The input design
-    arrives in two parts: its arrays (a measured record) as an argument, the rest closed
-    over (`eqx.partition`), so no large constant is compiled into the program.
-    """
-    dtype = truth_vector.dtype
+    """One record: input, noisy output, fit, validation on a fresh record (`_draw`, the
+    estimator, `_score`)."""
+    drawn = _draw(
+        cell_key,
+        index,
+        truth_vector,
+        snr,
+        design_arrays,
+        orders=orders,
+        n=n,
+        design_static=design_static,
+        noise=noise,
+        family=family,
+    )
     design = eqx.combine(design_arrays, design_static)
-    key = jax.random.fold_in(cell_key, index)
-    if family is not None:
-        system_key = jax.random.fold_in(key, _system_tag(family))
-        truth_vector = random_system(system_key, orders, design.bound, dtype).to_vector()
-    truth = CascadeParams.from_vector(truth_vector, orders, check=False)
-    key_u, key_e, key_u_val, key_e_val = jax.random.split(key, 4)
-    u = design(key_u, n, dtype)
-    y = add_noise(key_e, simulate(truth, u), snr, noise)
-    # the record's own Cramér-Rao bound (noise-free: 0), for the efficiency columns
-    bound = crlb(truth, u, snr=snr)
-    input_range = design.input_range(u)
+    input_range = design.input_range(drawn["u"])
     solution = fit(
-        u,
-        y,
+        drawn["u"],
+        drawn["y"],
         orders,
-        key=jax.random.fold_in(key, fit_key_tag),
+        key=jax.random.fold_in(drawn["key"], fit_key_tag),
         input_range=input_range,
     )
-    estimate = solution.params.to_vector().astype(dtype)
-    input_rms = jnp.sqrt(jnp.mean(u**2))
-
-    u_val = design(key_u_val, n, dtype)
-    y_val = add_noise(key_e_val, simulate(truth, u_val), snr, noise)
-    admissible = is_admissible(
-        CascadeParams.from_vector(estimate, orders, check=False), *input_range
+    estimate = solution.params.to_vector().astype(drawn["truth"].dtype)
+    error, admissible = _score(
+        estimate, drawn["truth"], drawn["u_val"], drawn["y_val"], input_range, orders=orders
     )
-    # An inadmissible estimate (unstable, unsorted breakpoints, ...) is not simulated:
-    # its score is inf, and the truth stands in so no NaN is ever computed.
-    safe = CascadeParams.from_vector(
-        jnp.where(admissible, estimate, truth_vector), orders, check=False
-    )
-    error = nrmse(y_val, simulate(safe, u_val))
-    error = jnp.where(admissible & jnp.isfinite(error), error, jnp.inf)
-    return {
-        "key": jax.random.key_data(key) if _is_typed(key) else key,
-        "estimate": estimate,
-        "status": solution.status.astype(jnp.int32),
-        "iterations": solution.iterations.astype(jnp.int32),
-        "cost": jnp.asarray(solution.cost, dtype),
-        "cycle_amplitude": jnp.asarray(solution.cycle_amplitude, dtype),
-        "path": solution.path.astype(jnp.int32),
-        "nrmse": error,
-        "admissible": admissible,
-        "truth": truth_vector,
-        "crlb": bound,
-        "input_rms": input_rms,
-        "input_crest": jnp.max(jnp.abs(u)) / input_rms,
-    }
+    return _outputs(drawn, solution, estimate, error, admissible)
 
 
 def _is_typed(key) -> bool:
@@ -290,6 +340,112 @@ def _executable(spec: Spec, cell: Cell, arguments) -> tuple:
     return compiled, seconds
 
 
+@functools.lru_cache(maxsize=16)
+def _host_programs(orders, n, experiment, family):
+    """The batched draw and score of a cell shape whose estimator runs on the host."""
+    spec_input, input_settings, spec_noise, noise_settings = experiment
+    from .._disturbance import disturbance
+    from .._inputs import input_design
+
+    design = input_design(spec_input, **dict(input_settings))
+    draw = functools.partial(
+        _draw,
+        orders=orders,
+        n=n,
+        design_static=_split(design)[1],
+        noise=disturbance(spec_noise, **dict(noise_settings)),
+        family=family,
+    )
+    score = functools.partial(_score, orders=orders)
+    options = compiler_options()
+    return (
+        jax.jit(jax.vmap(draw, in_axes=(None, 0, None, None, None)), compiler_options=options),
+        jax.jit(jax.vmap(score), compiler_options=options),
+    )
+
+
+def _host_chunk(spec: Spec, cell: Cell, fit, indices: np.ndarray, size: int) -> dict:
+    """Realisations `indices` with a host estimator (`_estimator._host`): the records are
+    drawn and the estimates scored in compiled, batched calls (padded to `size`, so a
+    cell compiles once), the fits run one record after another on the host, each timed
+    (`fit_seconds` per row)."""
+    experiment = _experiment(spec)
+    draw, score = _host_programs(spec.orders, cell.n, experiment, spec.family)
+    padded = np.concatenate([indices, np.full(size - indices.size, indices[-1])])
+    key, truth, snr, arrays = _arguments(spec, cell)
+    arguments = (key, jnp.asarray(padded.astype(np.uint32)), truth, snr, arrays)
+    cache_key = ("host", spec.orders, cell.n, experiment, spec.family, size, str(truth.dtype))
+    compile_seconds = 0.0
+    if cache_key not in _EXECUTABLES:
+        start = time.perf_counter()
+        shapes = jax.eval_shape(draw, *arguments)
+        estimate = jax.ShapeDtypeStruct(shapes["truth"].shape, truth.dtype)
+        bounds = (shapes["input_low"], shapes["input_high"])
+        _EXECUTABLES[cache_key] = (
+            draw.lower(*arguments).compile(),
+            score.lower(
+                estimate, shapes["truth"], shapes["u_val"], shapes["y_val"], bounds
+            ).compile(),
+        )
+        compile_seconds = time.perf_counter() - start
+    draw, score = _EXECUTABLES[cache_key]
+    drawn = {k: np.asarray(v) for k, v in jax.device_get(draw(*arguments)).items()}
+    count = indices.size
+    kinds = {"status": np.int32, "iterations": np.int32, "cost": float, "cycle_amplitude": float}
+    fields = {name: np.zeros(count, kind) for name, kind in {**kinds, "path": np.int32}.items()}
+    estimates = drawn["truth"].copy()  # padded rows: the truth stands in, never read
+    seconds = np.zeros(count)
+    for i in range(count):
+        u, y = np.array(drawn["u"][i]), np.array(drawn["y"][i])  # the function's own copies
+        start = time.perf_counter()
+        vector = fit.vector(u, y, spec.orders)
+        seconds[i] = time.perf_counter() - start
+        solution = fit.solution(vector, drawn["u"][i], drawn["y"][i], spec.orders)
+        estimates[i] = np.asarray(solution.params.to_vector(), np.float64)
+        for name in fields:
+            fields[name][i] = np.asarray(getattr(solution, name))
+    bounds = (drawn["input_low"], drawn["input_high"])
+    errors, admissible = jax.device_get(
+        score(
+            jnp.asarray(estimates, truth.dtype),
+            drawn["truth"],
+            drawn["u_val"],
+            drawn["y_val"],
+            bounds,
+        )
+    )
+    key_data = drawn["key"] if drawn["key"].ndim == 2 else np.asarray(drawn["key"])
+    return {
+        "key": key_data[:count],
+        "estimate": estimates[:count],
+        **{name: values for name, values in fields.items()},
+        "nrmse": np.asarray(errors)[:count],
+        "admissible": np.asarray(admissible)[:count],
+        "truth": drawn["truth"][:count],
+        "crlb": drawn["crlb"][:count],
+        "input_rms": drawn["input_rms"][:count],
+        "input_crest": drawn["input_crest"][:count],
+        "fit_seconds": seconds,
+        "compile_seconds": compile_seconds,
+    }
+
+
+def _fit(spec: Spec, cell: Cell):
+    """The cell's estimator with its settings."""
+    return estimator(cell.estimator, **dict(spec.estimator_settings(cell.estimator)))
+
+
+def records(spec: Spec, cell: Cell, indices) -> dict[str, np.ndarray]:
+    """The records realisations `indices` of `cell` fit (`u`, `y`, one row each) and
+    their validation records (`u_val`, `y_val`): the same for every estimator of a
+    sweep, for checking a table's rows against direct fits."""
+    indices = np.asarray(indices, np.int64)
+    draw, _ = _host_programs(spec.orders, cell.n, _experiment(spec), spec.family)
+    key, truth, snr, arrays = _arguments(spec, cell)
+    drawn = jax.device_get(draw(key, jnp.asarray(indices.astype(np.uint32)), truth, snr, arrays))
+    return {name: np.asarray(drawn[name]) for name in ("u", "y", "u_val", "y_val")}
+
+
 def run_chunk(spec: Spec, cell: Cell, indices) -> pd.DataFrame:
     """Realisations `indices` of `cell`, batched in one compiled call; one row each
     (`frame.attrs["normal_equations"]` says how the normal equations were formed).
@@ -304,6 +460,13 @@ def run_chunk(spec: Spec, cell: Cell, indices) -> pd.DataFrame:
     if indices.min() < 0 or indices.max() >= 2**32:
         raise ValueError("Realisation indices must lie in [0, 2**32).")
     size = max(spec.chunk_size, indices.size)
+    fit = _fit(spec, cell)
+    if is_host(fit):
+        outputs = _host_chunk(spec, cell, fit, indices, size)
+        outputs["key"] = _key_to_uint64(outputs["key"])
+        frame = realisation_frame(spec, cell, indices, outputs)
+        frame.attrs["normal_equations"] = normal_equations_backend(spec)
+        return frame
     padded = np.concatenate([indices, np.full(size - indices.size, indices[-1])])
     key, truth, snr, arrays = _arguments(spec, cell)
     arguments = (key, jnp.asarray(padded.astype(np.uint32)), truth, snr, arrays)
@@ -329,6 +492,10 @@ def normal_equations_backend(spec: Spec, dtype=None) -> str:
 
 def run_realisation(spec: Spec, cell: Cell, index: int) -> dict:
     """One realisation without `vmap` (to rerun a table row, and the batching oracle)."""
+    if is_host(_fit(spec, cell)):
+        out = _host_chunk(spec, cell, _fit(spec, cell), np.asarray([index], np.int64), 1)
+        out["key"] = _key_to_uint64(out["key"])
+        return {k: np.asarray(v)[0] if np.ndim(v) else np.asarray(v) for k, v in out.items()}
     key, truth, snr, arrays = _arguments(spec, cell)
     function = _function(spec, cell, batched=False)
     out = jax.device_get(function(key, np.uint32(index), truth, snr, arrays))
@@ -347,8 +514,11 @@ def chunk_memory(spec: Spec, cell: Cell, chunk_size: int | None = None) -> dict[
     size = chunk_size or spec.chunk_size
     key, truth, snr, arrays = _arguments(spec, cell)
     indices = jnp.zeros((size,), jnp.uint32)
-    function = _function(spec, cell, batched=True)
-    compiled = function.lower(key, indices, truth, snr, arrays).compile()
+    if is_host(_fit(spec, cell)):  # the compiled part is the draw (and the small score)
+        program = _host_programs(spec.orders, cell.n, _experiment(spec), spec.family)[0]
+    else:
+        program = _function(spec, cell, batched=True)
+    compiled = program.lower(key, indices, truth, snr, arrays).compile()
     analysis = compiled.memory_analysis()
     sizes = {
         "temp": int(analysis.temp_size_in_bytes),

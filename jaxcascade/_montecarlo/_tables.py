@@ -12,13 +12,16 @@ statement about the algorithm, not the estimate), `cycle_amplitude` (with status
 `cycled`, the largest spread of one parameter over the cycle; 0 otherwise),
 `robust_path` (`Solution.path` by name: `only` for a one-path estimator, `adaptive` or
 `multistart` for robust), one column
-per parameter with the estimate, `crlb_<name>` with the record's own output-error
-Cramér-Rao bound on its standard deviation (`_efficiency.crlb`; 0 noise-free),
+per parameter with the estimate, `crlb_<name>` with the record's own Cramér-Rao bound
+on its standard deviation for the cell's noise (`_efficiency.crlb`: coloured for `ar`
+and `arma` noise, the Gaussian bound of the noise's variance for white, Student-t and
+outlier noise; 0 noise-free),
 `true_<name>` with the
 true value (the row's own for a family of systems), `input_rms` and `input_crest`
 (the estimation record's root mean square and crest factor `max|u| / rms`), and the
 timing columns
-`fit_seconds` (compute seconds per fit of its chunk, compilation excluded) and
+`fit_seconds` (compute seconds per fit of its chunk, compilation excluded; a host
+function's own time on the row's record) and
 `compile_seconds` (seconds its chunk spent compiling, 0 when cached); the timing
 columns are the only ones that differ between two runs of one spec (`without_timing`).
 
@@ -132,7 +135,9 @@ def realisation_frame(spec, cell, indices, outputs: dict) -> pd.DataFrame:
         if name in outputs:
             columns[name] = np.asarray(outputs[name], dtype=np.float64)
     for name in TIMING_COLUMNS:
-        columns[name] = np.full(count, float(outputs.get(name, np.nan)))
+        # one figure per chunk (batched estimators), or one per row (host functions)
+        values = np.asarray(outputs.get(name, np.nan), dtype=np.float64)
+        columns[name] = np.broadcast_to(values, (count,)).copy()
     return pd.DataFrame(columns)
 
 
