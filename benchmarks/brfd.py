@@ -2,7 +2,7 @@
 
     python benchmarks/brfd.py [--data ../shared/data/brfd] [--out results/brfd]
         [--decimate 16] [--init-samples 50] [--only NAME] [--stability] [--all-records]
-        [--jobs N]
+        [--jobs N] [--collect]
 
 Each run is `jaxcascade loop` in a fresh process (its report in OUT/<run>/), timed, its
 peak resident memory (`wait4`), its largest count of memory mappings (sampled every
@@ -154,6 +154,21 @@ def run_loop(argv: list[str]) -> dict:
     }
 
 
+def _rounded(value, digits):
+    """`round(value, digits)`, None for an unknown (NaN) figure."""
+    return None if value != value else round(value, digits)
+
+
+def stored_resources(report: pathlib.Path) -> dict:
+    """What `run_loop` measured of a finished run (`resources.json`), NaN where the run
+    left no record of it."""
+    path = report / "resources.json"
+    if path.exists():
+        return json.loads(path.read_text())
+    nan = float("nan")
+    return {"returncode": 0, "seconds": nan, "peak_rss_mb": nan, "max_mappings": nan}
+
+
 def lugre_rows(train, data, scored, decimate, run):
     import jax
     import numpy as np
@@ -199,6 +214,12 @@ def main(argv=None) -> int:
     parser.add_argument("--only", default=None, help="run only the runs whose name holds this")
     parser.add_argument("--stability", action="store_true", help="retries 0/2 x seeds 0-2")
     parser.add_argument(
+        "--collect",
+        action="store_true",
+        help="run no loop: the tables from the reports already under OUT (runs without one "
+        "are left out and named)",
+    )
+    parser.add_argument(
         "--jobs",
         type=int,
         default=1,
@@ -218,10 +239,25 @@ def main(argv=None) -> int:
     command = "python benchmarks/brfd.py " + " ".join(sys.argv[1:] if argv is None else argv)
     rows, resources, choices = [], [], []
     planned = [r for r in runs(data, args) if not args.only or args.only in r[0]]
-    loops = [loop_argv(out, data, args, *r) for r in planned]
-    # each loop a fresh process; `--jobs` of them at a time (wall times then overlap)
-    with concurrent.futures.ThreadPoolExecutor(max_workers=max(1, args.jobs)) as pool:
-        measurements = list(pool.map(run_loop, loops))
+    if args.collect:
+        # the tables from the reports already written; a run without one is left out
+        # and named, and a run's resources are unknown where it left no record of them
+        measurements, kept = [], []
+        for r in planned:
+            if not (out / r[0] / "report.json").exists():
+                print(f"{r[0]}: not run (no report.json); left out", file=sys.stderr)
+                continue
+            kept.append(r)
+            measurements.append(stored_resources(out / r[0]))
+        planned = kept
+    else:
+        loops = [loop_argv(out, data, args, *r) for r in planned]
+        # each loop a fresh process; `--jobs` of them at a time (wall times then overlap)
+        with concurrent.futures.ThreadPoolExecutor(max_workers=max(1, args.jobs)) as pool:
+            measurements = list(pool.map(run_loop, loops))
+        for (run, *_), measured in zip(planned, measurements, strict=True):
+            record = {k: v for k, v in measured.items() if k != "stdout"}
+            (out / run / "resources.json").write_text(json.dumps(record, indent=1) + "\n")
     for (run, train, valid, tests, decimate, _extra), measured in zip(
         planned, measurements, strict=True
     ):
@@ -235,8 +271,8 @@ def main(argv=None) -> int:
             "run": run,
             "records": len(train),
             "decimate": decimate,
-            "seconds": round(measured["seconds"], 1),
-            "peak_rss_mb": round(measured["peak_rss_mb"]),
+            "seconds": _rounded(measured["seconds"], 1),
+            "peak_rss_mb": _rounded(measured["peak_rss_mb"], None),
             "max_mappings": measured["max_mappings"],
             "programs_compiled": full["programs_compiled"],
             "actions": "; ".join(f"{a['action']} {a['effect']}" for a in full["actions"]),
