@@ -7,12 +7,15 @@ Each record is Example 1 with one effect of the library present but not declared
 estimation and 2000 validation samples with independent inputs and noise; plus a
 record with no extra effect. Writes OUT.csv and OUT.md: the effect present, the
 effects the loop added, NRMSE before and after, the ratio to the noise floor, and the
-runtime.
+runtime. Each record's row is appended to OUT.rows.jsonl as it finishes, and a run
+started again with the same settings resumes from it (`--fresh` starts over); the file
+is removed once the tables are written.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import pathlib
 import time
 
@@ -23,6 +26,9 @@ def main(argv=None) -> int:
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--snr", type=float, default=20.0)
     parser.add_argument("--n", type=int, default=2000)
+    parser.add_argument(
+        "--fresh", action="store_true", help="ignore OUT.rows.jsonl of an interrupted run"
+    )
     args = parser.parse_args(argv)
 
     import jax
@@ -33,8 +39,23 @@ def main(argv=None) -> int:
     import jaxcascade as jc
     from jaxcascade._testing import UNDECLARED, undeclared_record
 
+    out = pathlib.Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    partial = out.with_suffix(".rows.jsonl")
+    settings = {"seed": args.seed, "snr": args.snr, "n": args.n}
+    done = {}
+    if partial.exists() and not args.fresh:
+        lines = [json.loads(line) for line in partial.read_text().splitlines() if line]
+        if lines and lines[0] == settings:
+            done = {row["effect_present"]: row for row in lines[1:]}
+            print(f"resuming: {len(done)} records from {partial}", flush=True)
+    if not done:
+        partial.write_text(json.dumps(settings) + "\n")
     rows = []
     for name in UNDECLARED:
+        if (name or "none") in done:
+            rows.append(done[name or "none"])
+            continue
         model, ar = UNDECLARED[name]()
         key = jax.random.PRNGKey(args.seed)
         k_est, k_val = jax.random.split(key)
@@ -46,18 +67,18 @@ def main(argv=None) -> int:
             {
                 "effect_present": name or "none",
                 "effect_added": ",".join(result.added) or "none",
-                "named": result.added == ([name] if name else []),
-                "nrmse_before": result.before.error,
-                "nrmse_after": result.after.error,
-                "after_over_floor": result.after.error * args.snr,
-                "residual_tests_pass_after": result.after.tests.ok,
+                "named": bool(result.added == ([name] if name else [])),
+                "nrmse_before": float(result.before.error),
+                "nrmse_after": float(result.after.error),
+                "after_over_floor": float(result.after.error * args.snr),
+                "residual_tests_pass_after": bool(result.after.tests.ok),
                 "seconds": time.perf_counter() - start,
             }
         )
         print(rows[-1], flush=True)
+        with partial.open("a") as stream:
+            stream.write(json.dumps(rows[-1]) + "\n")
     table = pd.DataFrame(rows)
-    out = pathlib.Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
     table.to_csv(out.with_suffix(".csv"), index=False)
     lines = [
         f"# Model-error loop on records with an undeclared effect (SNR {args.snr:g}, "
@@ -76,6 +97,7 @@ def main(argv=None) -> int:
             f"{r['residual_tests_pass_after']} | {r['seconds']:.0f} |"
         )
     out.with_suffix(".md").write_text("\n".join(lines) + "\n")
+    partial.unlink()
     return 0
 
 
