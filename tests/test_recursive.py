@@ -269,3 +269,96 @@ def test_bench_recursive_json(capsys):
         figures["updates_per_s"] / (4 * figures["sample_rate_hz"])
     )
     assert main(["bench", "--estimator", "recursive", "--sample-rate", "0"]) == 2
+
+
+# ---- systems that change in the Monte-Carlo engine (`[system.change]`) -----------------
+
+CHANGE_SPEC = {
+    "example": 1,
+    "n": 700,
+    "snr": 25.0,
+    "realisations": 4,
+    "chunk_size": 2,
+    "estimators": ["recursive"],
+    "estimator": {"recursive": {"lam": 0.99, "first_samples": 200}},
+    "system": {"change": {"parameter": "cR", "at": 400, "to": 0.45}},
+}
+
+
+def test_a_change_in_a_spec_parses_and_round_trips():
+    from jaxcascade._montecarlo._spec import Spec
+
+    spec = Spec.from_dict(CHANGE_SPEC)
+    assert spec.change == Change("cR", 400, to=0.45)
+    assert dict(spec.estimator_settings("recursive"))["every"] == 10  # the default spacing
+    assert Spec.from_dict(spec.to_dict()) == spec
+    drift = Spec.from_dict(
+        {**CHANGE_SPEC, "system": {"change": {"parameter": "b1", "at": 100, "drift": 1e-4}}}
+    )
+    assert drift.change.drift == 1e-4
+    for bad, match in (
+        ({"estimators": ["literal"], "estimator": {}}, "only the on-line"),
+        ({"system": {"change": {"parameter": "cR", "at": 700, "to": 0.45}}}, "inside N"),
+        ({"system": {"change": {"parameter": "gap", "at": 10, "to": 0.45}}}, "unknown"),
+        ({"system": {"change": {"parameter": "cR", "at": 10, "step": 1}}}, "Unknown key"),
+    ):
+        with pytest.raises(ValueError, match=match):
+            Spec.from_dict({**CHANGE_SPEC, **bad})
+    with pytest.raises(ValueError, match="family"):
+        Spec.from_dict(
+            {
+                **{k: v for k, v in CHANGE_SPEC.items() if k != "example"},
+                "system": {"family": "random", "change": {"parameter": "cR", "at": 10, "to": 1}},
+            }
+        )
+
+
+def test_a_change_gives_other_records_and_the_tracking_columns(tmp_path, monkeypatch):
+    from jaxcascade._montecarlo import _run
+    from jaxcascade._montecarlo._engine import cell_key, tracking_samples
+    from jaxcascade._montecarlo._spec import Spec
+    from jaxcascade._montecarlo._tables import tracking_summary, without_timing
+
+    spec = Spec.from_dict(CHANGE_SPEC)
+    plain = Spec.from_dict({k: v for k, v in CHANGE_SPEC.items() if k != "system"})
+    cell = spec.cells()[0]
+    assert not np.array_equal(cell_key(spec, cell), cell_key(plain, cell))
+
+    # a run killed after its first chunk continues from the chunk on disk
+    out = tmp_path / "change.parquet"
+    original = _run._results
+
+    def killed(spec, chunks, dtype):
+        results = original(spec, chunks, dtype)
+        yield next(results)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(_run, "_results", killed)
+    with pytest.raises(KeyboardInterrupt):
+        _run.run(spec, out, progress=False)
+    monkeypatch.setattr(_run, "_results", original)
+    resumed = _run.run(spec, out, progress=False)
+    fresh = _run.run(spec, progress=False)
+    pd = pytest.importorskip("pandas")
+    pd.testing.assert_frame_equal(without_timing(resumed), without_timing(fresh))
+
+    # the error trajectory is the estimate minus the truth of its sample: the final row
+    # is the final estimate minus the changed truth
+    samples = tracking_samples(700, 10)
+    track = np.stack(resumed["track_cR"].to_list())
+    assert track.shape == (4, samples.size) and samples[-1] == 700
+    np.testing.assert_allclose(track[:, -1], resumed["cR"] - 0.45, rtol=0, atol=1e-12)
+    assert np.all(resumed["true_cR"] == 0.45)
+    # measures as `_tracking` defines them, from the stored trajectories
+    inside = np.all(
+        np.abs(np.stack([np.stack(resumed[f"track_{p}"].to_list()) for p in spec.orders.names]))
+        <= 0.05,
+        axis=0,
+    )
+    for r in range(4):
+        hits = np.flatnonzero(inside[r] & (samples > 400))
+        want = samples[hits[0]] - 400 if hits.size else np.inf
+        assert resumed["reentry"][r] == want
+    summary = tracking_summary(resumed)
+    assert summary["count"].tolist() == [4]
+    assert summary["reentered_rate"][0] == np.mean(np.isfinite(resumed["reentry"]))

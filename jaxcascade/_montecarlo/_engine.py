@@ -31,6 +31,17 @@ computed too), and `compile_seconds` the time this chunk spent compiling (0 when
 executable was already there). Both vary from run to run; `TIMING_COLUMNS` names them,
 and `without_timing` drops them to compare tables exactly.
 
+**Systems that change** (`Spec.change`, `_changing`). The record comes from the
+trajectory of true parameters (`simulate_changing`), the validation record from the
+system at the end, and the estimator (`recursive`, keeping its estimate every `every`
+samples) returns its trajectory: per realisation the error `estimate - truth(t)` at the
+recorded samples (`tracking_samples`), and from it the tracking measures of
+`_tracking` (samples to re-entry within 0.05 of the new truth, whether it settled, the
+steady RMSE after re-entry, whether it was within the band before the change). The
+change enters the cell identity, so its records differ from those of the unchanged
+system (and a spec without a change keeps its keys). No Cramér-Rao bound is computed
+for a changing system.
+
 **Memory.** Peak memory of a chunk grows as `chunk_size x N` (each realisation holds a
 few `N x P` regression matrices and signals of length N); `chunk_memory` reports
 XLA's buffer sizes for a cell and chunk size.
@@ -48,6 +59,7 @@ import jax.numpy as jnp
 import numpy as np
 import pandas as pd
 
+from .._changing import Change, simulate_changing, trajectory_traced
 from .._compile import compiler_options
 from .._efficiency import crlb
 from .._estimator import estimator
@@ -81,9 +93,25 @@ def cell_identity(spec: Spec, cell: Cell) -> str:
             "amplitude": float(spec.amplitude).hex(),
             "n": int(cell.n),
             "snr": float(cell.snr).hex(),
+            **({"change": _change_identity(spec.change)} if spec.change is not None else {}),
         },
         sort_keys=True,
     )
+
+
+def _change_identity(change: Change) -> dict:
+    out = {"parameter": change.parameter, "at": int(change.at)}
+    for name in ("to", "drift"):
+        value = getattr(change, name)
+        if value is not None:
+            out[name] = float(value).hex()
+    return out
+
+
+def tracking_samples(n: int, every: int) -> np.ndarray:
+    """The samples (1-based counts) after which `recursive` with `every` records its
+    estimate on a record of `n` samples (the last row: the final estimate)."""
+    return np.minimum(np.arange(1, -(-n // every) + 1) * every, n)
 
 
 def cell_key(spec: Spec, cell: Cell):
@@ -99,7 +127,18 @@ def _system_tag(family: str) -> np.uint32:
 
 
 def _realisation(
-    cell_key, index, truth_vector, snr, *, orders, n, amplitude, fit, fit_key_tag, family
+    cell_key,
+    index,
+    truth_vector,
+    snr,
+    *,
+    orders,
+    n,
+    amplitude,
+    fit,
+    fit_key_tag,
+    family,
+    change=None,
 ):
     """One record: input, noisy output, fit, validation on a fresh record.
 
@@ -114,9 +153,15 @@ def _realisation(
     truth = CascadeParams.from_vector(truth_vector, orders, check=False)
     key_u, key_e, key_u_val, key_e_val = jax.random.split(key, 4)
     u = uniform_input(key_u, n, amplitude, dtype)
-    y = add_noise(key_e, simulate(truth, u), snr)
-    # the record's own Cramér-Rao bound (noise-free: 0), for the efficiency columns
-    bound = crlb(truth, u, snr=snr)
+    if change is None:
+        y = add_noise(key_e, simulate(truth, u), snr)
+        # the record's own Cramér-Rao bound (noise-free: 0), for the efficiency columns
+        bound = crlb(truth, u, snr=snr)
+    else:
+        truths = trajectory_traced(truth_vector, change, n, orders)
+        y = add_noise(key_e, simulate_changing(truths, u, orders), snr)
+        truth_vector = truths[-1]  # the system at the end: validation and true_<name>
+        truth = CascadeParams.from_vector(truth_vector, orders, check=False)
     solution = fit(
         u,
         y,
@@ -138,7 +183,7 @@ def _realisation(
     )
     error = nrmse(y_val, simulate(safe, u_val))
     error = jnp.where(admissible & jnp.isfinite(error), error, jnp.inf)
-    return {
+    out = {
         "key": jax.random.key_data(key) if _is_typed(key) else key,
         "estimate": estimate,
         "status": solution.status.astype(jnp.int32),
@@ -149,8 +194,13 @@ def _realisation(
         "nrmse": error,
         "admissible": admissible,
         "truth": truth_vector,
-        "crlb": bound,
     }
+    if change is None:
+        out["crlb"] = bound
+    else:
+        samples = tracking_samples(n, fit.every)
+        out["track"] = solution.history[1:].astype(dtype) - truths[samples - 1]
+    return out
 
 
 def _is_typed(key) -> bool:
@@ -158,7 +208,7 @@ def _is_typed(key) -> bool:
 
 
 @functools.lru_cache(maxsize=64)
-def _compiled(orders, n, amplitude, name, settings, batched, family=None):
+def _compiled(orders, n, amplitude, name, settings, batched, family=None, change=None):
     """The jitted (optionally vmapped) realisation function of one cell shape."""
     one = functools.partial(
         _realisation,
@@ -168,6 +218,7 @@ def _compiled(orders, n, amplitude, name, settings, batched, family=None):
         fit=estimator(name, **dict(settings)),
         fit_key_tag=np.uint32(_hash_words(f"estimator:{name}")[0]),
         family=family,
+        change=change,
     )
     if batched:
         one = jax.vmap(one, in_axes=(None, 0, None, None))
@@ -186,7 +237,14 @@ def _arguments(spec: Spec, cell: Cell, dtype=None):
 def _function(spec: Spec, cell: Cell, batched: bool):
     settings = spec.estimator_settings(cell.estimator)
     return _compiled(
-        spec.orders, cell.n, spec.amplitude, cell.estimator, settings, batched, spec.family
+        spec.orders,
+        cell.n,
+        spec.amplitude,
+        cell.estimator,
+        settings,
+        batched,
+        spec.family,
+        spec.change,
     )
 
 
@@ -206,6 +264,7 @@ def _executable(spec: Spec, cell: Cell, arguments) -> tuple:
         cell.estimator,
         spec.estimator_settings(cell.estimator),
         spec.family,
+        spec.change,
         indices.shape,
         str(truth.dtype),
         str(key.dtype),
