@@ -30,9 +30,9 @@ from jaxtyping import Array, Bool, Float
 ANTI_WINDUP = ("none", "trace", "directional")
 
 
-def forgetting(k, lam, memory0, growth):
+def forgetting(k, lam, memory0, growth, acceleration=0.0):
     """The forgetting factor after `k` updates: `lam_k = min(lam, 1 - 1 / (memory0 +
-    growth k))`.
+    growth k + acceleration k^2))`.
 
     `1 / (1 - lam_k)` is the recursion's memory in samples: it starts at `memory0` and
     grows by `growth` per sample until it reaches `1 / (1 - lam)` (never, for `lam = 1`:
@@ -46,7 +46,8 @@ def forgetting(k, lam, memory0, growth):
     forgets everything older than its memory: what tracking needs, at a variance of
     about `(1 - lam) k / 2` times least squares.
     """
-    memory = memory0 + growth * jnp.asarray(k, jnp.result_type(float))
+    k = jnp.asarray(k, jnp.result_type(float))
+    memory = memory0 + growth * k + acceleration * k * k
     return jnp.minimum(lam, 1.0 - 1.0 / memory)
 
 
