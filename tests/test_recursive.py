@@ -390,3 +390,29 @@ def test_a_change_gives_other_records_and_the_tracking_columns(tmp_path, monkeyp
     summary = tracking_summary(resumed)
     assert summary["count"].tolist() == [4]
     assert summary["reentered_rate"][0] == np.mean(np.isfinite(resumed["reentry"]))
+
+
+def test_sweep_command_with_a_change_writes_the_tracking_summary_and_plot(tmp_path, capsys):
+    import pandas as pd
+
+    spec = tmp_path / "change.toml"
+    spec.write_text(
+        "n = 700\nsnr = 25\nrealisations = 2\nchunk_size = 2\n"
+        'estimators = ["recursive"]\n[estimator.recursive]\nfirst_samples = 200\n'
+        'every = 50\n[system.change]\nparameter = "b1"\nat = 300\ndrift = 1e-4\n'
+    )
+    out = tmp_path / "change.parquet"
+    # --example on the command line keeps the file's change
+    args = ["sweep", str(spec), "--example", "1", "--out", str(out)]
+    assert main([*args, "--plots", str(tmp_path / "plots")]) == 0
+    summary = pd.read_csv(tmp_path / "change.tracking.csv")
+    assert summary["count"].tolist() == [2]
+    assert (tmp_path / "plots" / "change_tracking_n700_snr25.png").stat().st_size > 0
+    table = pd.read_parquet(out)
+    assert np.allclose(table["true_b1"], -0.2 + 1e-4 * (699 - 300))  # the system at the end
+    truth = pd.read_csv(tmp_path / "change.trajectory.csv")
+    assert truth["sample"].tolist() == list(range(50, 701, 50))
+    np.testing.assert_allclose(truth["b1"], -0.2 + 1e-4 * np.maximum(truth["sample"] - 1 - 300, 0))
+    track = np.stack(table["track_b1"].to_list())
+    np.testing.assert_allclose(track[:, -1], table["b1"] - truth["b1"].iloc[-1], atol=1e-12)
+    assert "reentry" in capsys.readouterr().out

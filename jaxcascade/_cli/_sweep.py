@@ -102,17 +102,21 @@ def _print_cells(summary) -> None:
 
 
 def _tracking(spec, table, out, plots) -> None:
-    """A system that changes: the tracking summary (`OUT.tracking.csv`) and, with
-    `--plots`, the median error trajectories with quantile bands."""
-    from .._montecarlo._tables import tracking_summary
+    """A system that changes: the tracking summary (`OUT.tracking.csv`), the true
+    parameters at the recorded samples (`OUT.trajectory.csv`) and, with `--plots`, the
+    median error trajectories with quantile bands."""
+    from .._montecarlo._tables import tracking_summary, true_trajectory
 
     summary = tracking_summary(table)
     path = out.with_name(out.name.removesuffix(".parquet") + ".tracking.csv")
     summary.to_csv(path, index=False)
+    truth = true_trajectory(spec)
+    truth_path = out.with_name(out.name.removesuffix(".parquet") + ".trajectory.csv")
+    truth.to_csv(truth_path, index=False)
     columns = ["n", "snr", "before_change_rate", "reentered_rate", "settled_rate"]
     columns += ["reentry_median", "steady_rmse", "steady_rmse_changed"]
     print(summary[columns].to_string(index=False, float_format=lambda v: f"{v:.4g}"))
-    print(f"written: {path}")
+    print(f"written: {path}, {truth_path}")
     if plots:
         from .._plot._tracking import tracking_figures
 

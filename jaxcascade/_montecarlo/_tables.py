@@ -154,6 +154,24 @@ def tracking_summary(table: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def true_trajectory(spec) -> pd.DataFrame:
+    """The true parameters of a sweep of a system that changes at the samples where the
+    estimate is recorded (`_engine.tracking_samples`), one row per N and sample."""
+    from .._changing import trajectory
+    from ._engine import tracking_samples
+
+    every = dict(spec.estimator_settings("recursive"))["every"]
+    frames = []
+    for n in spec.n:
+        samples = tracking_samples(n, every)
+        values = np.asarray(trajectory(spec.truth(), spec.change, n))[samples - 1]
+        frame = pd.DataFrame(values, columns=list(spec.orders.names))
+        frame.insert(0, "sample", samples)
+        frame.insert(0, "n", n)
+        frames.append(frame)
+    return pd.concat(frames, ignore_index=True)
+
+
 def _mean_se(values: np.ndarray) -> tuple[float, float]:
     if values.size == 0:
         return float("nan"), float("nan")
