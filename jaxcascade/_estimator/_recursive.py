@@ -57,17 +57,17 @@ regression: `phi(t)` is built from the current estimate and then treated as data
 dependence of `v`, `x` and so of `phi(t) theta` on theta is ignored. Near the truth the
 error then contracts only by the paper's fixed-point map, and on short memories slowly:
 noise-free Example 2 from up to 1 % off the truth (`lam = 0.99`), none of 200 records
-reached 1e-6 by N = 2000 (76 % 1e-3). On one record tried at `lam = 0.95`, putting in the true `x` took the final
-error from 1e-8 to 1e-12 and the true `v` changed nothing: the slow mode is `x`'s
-dependence on theta through the linear block's recursion. With `gradient=True`
-the gain uses instead `psi(t)`, the total derivative of the key-term prediction
-`phi(t) theta` with respect to theta (with `x(t)`'s sensitivity carried through eq.
-22's recursion, the switching functions held: they are piecewise constant), and one
-full `P`: the recursive prediction-error (Gauss-Newton) form of the same regression
-(Ljung and Söderström 1983): near the truth its steps are Gauss-Newton steps on the
-prediction error, not steps of the fixed-point map. The
-error it corrects is the same `yc(t) - phi(t) theta`, so the truth stays an exact fixed
-point. From the same starts 189 of the 200 reached 1e-6 (all 1e-3).
+reached 1e-6 by N = 2000 (76 % 1e-3). On one record tried at `lam = 0.95`, putting in
+the true `x` took the final error from 1e-8 to 1e-12 and the true `v` changed nothing:
+the slow mode is `x`'s dependence on theta through the linear block's recursion. With
+`gradient=True` the gain uses instead `psi(t)`, the total derivative of the key-term
+prediction `phi(t) theta` with respect to theta (with `x(t)`'s sensitivity carried
+through eq. 22's recursion, the switching functions held: they are piecewise
+constant), and one full `P`: the recursive prediction-error (Gauss-Newton) form of the
+same regression (Ljung and Söderström 1983): near the truth its steps are Gauss-Newton
+steps on the prediction error, not steps of the fixed-point map. The error it corrects
+is the same `yc(t) - phi(t) theta`, so the truth stays an exact fixed point. From the
+same starts 189 of the 200 reached 1e-6 (all 1e-3).
 
 **What is measured** (`benchmarks/recursive_noise_free.py`, `recursive_vs_batch.py`).
 The true parameters are an exact fixed point (zero a-priori error at every sample,
@@ -284,22 +284,26 @@ def _divide_breakpoints(theta, init_theta, orders):
     return out
 
 
-def _hold_breakpoints(proposal, theta, init_theta, orders, u_min, u_max, fallback=None):
-    """`proposal` (breakpoints as `D M`) with each breakpoint that is not inside the input
-    range on its side of 0, in order (and every one after it), held where it is in
-    `theta` (or put at `fallback`, in `D` coordinates): its `D M` becomes that `D` times
-    the proposed slope. Slopes and everything else unchanged."""
+def _hold_breakpoints(proposal, proposed_D, held_at, init_theta, orders, u_min, u_max):
+    """`proposal` (breakpoints as `D M`; `proposed_D` the same with `D`, `model`'s
+    output) with each breakpoint that is not inside the input range on its side of 0,
+    in order (and every one after it), held at its value in `held_at` (`D`
+    coordinates): its `D M` becomes that `D` times the proposed slope. Slopes and
+    everything else unchanged. Returns the held proposal and its `D` form (a held
+    breakpoint whose proposed slope is 0 at its initial value, as `model` gives it)."""
     s = orders.slices
-    D_new = _divide_breakpoints(proposal, init_theta, orders)
-    D_old = _divide_breakpoints(theta, init_theta, orders) if fallback is None else fallback
-    out = proposal
+    out, out_D = proposal, proposed_D
     for name, M, outward, edge in (("DR", "MR", 1.0, u_max), ("DL", "ML", -1.0, u_min)):
-        d, slope = D_new[s[name]], proposal[s[M]][1:]
+        d, slope = proposed_D[s[name]], proposal[s[M]][1:]
         previous = jnp.concatenate([jnp.zeros((1,), d.dtype), d[:-1]])
         ok = (outward * (d - previous) > 0) & (outward * (edge - d) > 0)
         ok = jnp.cumprod(ok) > 0
-        out = out.at[s[name]].set(jnp.where(ok, d, D_old[s[name]]) * slope)
-    return out
+        held = held_at[s[name]]
+        out = out.at[s[name]].set(jnp.where(ok, d, held) * slope)
+        out_D = out_D.at[s[name]].set(
+            jnp.where(ok, d, jnp.where(slope != 0, held, init_theta[s[name]]))
+        )
+    return out, out_D
 
 
 def _multiply_breakpoints(theta, orders):
@@ -366,17 +370,21 @@ def _recursive(
     def model(theta):
         return _divide_breakpoints(theta, init_theta, o)
 
+    def at_switch(theta):
+        # the end of the first iteration: its NS and LD estimates and their information
+        # stay (breakpoints outside the range back at their initial values), the
+        # backlash restarts at its initial values
+        kept = jnp.concatenate([theta[o.static_dynamic], init_theta[o.backlash]])
+        return _hold_breakpoints(kept, model(kept), init_theta, init_theta, o, u_min, u_max)[0]
+
     def step(carry, inputs):
         theta, P1, P2, u_past, y_past, x_past, extra, sq = carry
         k, u_t, y_t, valid = inputs  # k: samples since the start, over all passes
         t = k % T
         first = k < first_samples
         switch = (k == first_samples) & (first_samples > 0)
-        # the end of the first iteration: its NS and LD estimates and their information
-        # stay, the backlash restarts at its initial values
-        kept = jnp.concatenate([theta[o.static_dynamic], init_theta[o.backlash]])
-        kept = _hold_breakpoints(kept, kept, init_theta, o, u_min, u_max, init_theta)
-        theta = jnp.where(switch, kept, theta)
+        # (`switch` does not depend on the record: a real branch under `vmap`)
+        theta = jax.lax.cond(switch, at_switch, lambda theta: theta, theta)
         P2 = jnp.where(switch, delta * jnp.eye(2, dtype=dtype), P2)
         x_past = jnp.where(switch, y_past, x_past)
         # a new pass starts from rest, as the record does
@@ -387,7 +395,8 @@ def _recursive(
             Pf = jnp.where(switch, jax.scipy.linalg.block_diag(P1, P2), Pf)
             S = jnp.where(switch | restart, 0.0, S)
 
-        params = _params(model(theta), o)
+        current_D = model(theta)
+        params = _params(current_D, o)
         u_w = jnp.concatenate([u_past, u_t[None]])
         y_w = jnp.concatenate([y_past, y_t[None]])
         v_w = pwl(params, u_w)  # eq. 21 at the window's inputs
@@ -462,9 +471,12 @@ def _recursive(
             # of the update taken: a slope estimated at exactly 0 (a segment the first
             # iteration never saw) leaves its `D M / M` undefined, and rejecting every
             # update that moves it froze the whole estimate (Example 2, 5 of 60 records).
-            held = _hold_breakpoints(proposal, theta, init_theta, o, u_min, u_max)
+            proposed_D = model(proposal)
+            held, held_D = _hold_breakpoints(
+                proposal, proposed_D, current_D, init_theta, o, u_min, u_max
+            )
             proposal = jnp.where(first, proposal, held)
-            keep = first | is_admissible(_params(model(proposal), o), u_min, u_max)
+            keep = first | is_admissible(_params(held_D, o), u_min, u_max)
         else:
             keep = jnp.asarray(True)
         theta = jnp.where(keep, proposal, theta)
