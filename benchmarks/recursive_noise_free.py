@@ -14,7 +14,7 @@ otherwise the defaults: the on-line first iteration on 400 samples, projection o
 - `gradient, warm 1%, lam=0.99, delta=0.01`: the same from the truth perturbed by up
   to 1% (no first iteration), against the key-term regressor's `warm 1%` row below;
 - `lam=0.98`, `0.95`, `0.93`: constant forgetting after the start (memory 50, 20, 14);
-- `default`: the schedule that tends to 1, `lam_k = 1 - 1/(10 + 0.25 k)`;
+- `default`: the schedule that tends to 1, `lam_k = 1 - 1/(10 + 0.1 k + 3e-4 k^2)`;
 - `warm 1%, lam=0.99, delta=0.01`: started at the truth perturbed by up to 1% per
   parameter, with no first iteration (the local contraction alone);
 - `8 passes, lam=0.99`: the recursion run over the record 8 times: OFF-LINE (the
