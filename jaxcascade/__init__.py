@@ -35,6 +35,13 @@ Efficiency
 Monte-Carlo sweeps
     `Spec`, `Cell`, `run`, `run_chunk`, `run_realisation`, `cell_key`, `chunk_memory`;
     `summarise`, `compare`, `read_summary`, `read_metadata`; `plot_sweep`.
+On-line identification and systems that change
+    `Recursive` / `recursive` (the key-term regression by recursive least squares with
+    forgetting, the paper's closing remark); `Change`, `trajectory`,
+    `simulate_changing` (a parameter that steps or drifts, and the cascade simulated
+    with it); `tracking`, `Tracking` (the tracking study of one change),
+    `tracking_summary` and `plot_tracking` (re-entry, steady RMSE and the median error
+    trajectory of a sweep with `[system.change]`).
 Measured data and the model-error loop
     `read_record`, `record_from_arrays`, `split_record`, `Record`, `Scaling`;
     `residual_tests`, `ResidualTests`, `regime_from_switches`, `plot_residual_tests`,
@@ -59,6 +66,11 @@ _MODULES = {
         "ARX",
         "best_arx",
         "fit_arx",
+    ),
+    "._changing": (
+        "Change",
+        "simulate_changing",
+        "trajectory",
     ),
     "._data": (
         "Record",
@@ -103,6 +115,10 @@ _MODULES = {
         "pem",
         "pem_fit",
     ),
+    "._estimator._recursive": (
+        "Recursive",
+        "recursive",
+    ),
     "._estimator._refine": ("refine",),
     "._estimator._robust": (
         "Robust",
@@ -143,6 +159,11 @@ _MODULES = {
         "read_metadata",
         "read_summary",
         "summarise",
+        "tracking_summary",
+    ),
+    "._montecarlo._tracking": (
+        "Tracking",
+        "tracking",
     ),
     "._noise": ("ARNoise",),
     "._disturbance": (
@@ -161,6 +182,7 @@ _MODULES = {
         "save_residual_figures",
     ),
     "._plot._sweep": ("plot_sweep",),
+    "._plot._tracking": ("plot_tracking",),
     "._prior": ("random_system",),
     "._regression": ("regression",),
     "._simulate": (

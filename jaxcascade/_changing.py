@@ -90,6 +90,22 @@ def trajectory(truth: CascadeParams, change: Change, n: int) -> Float[Array, "T 
     return jnp.asarray(table, dtype=truth.to_vector().dtype)
 
 
+def trajectory_traced(
+    truth_vector: Float[Array, " P"], change: Change, n: int, orders: Orders
+) -> Float[Array, "T P"]:
+    """`trajectory` inside traced code (the Monte-Carlo engine): the same table from a
+    parameter vector, without the checks (the spec made them, `Spec.change`)."""
+    column = orders.names.index(change.parameter)
+    dtype = truth_vector.dtype
+    t = jnp.arange(n)
+    start = truth_vector[column]
+    if change.to is not None:
+        values = jnp.where(t >= change.at, jnp.asarray(change.to, dtype), start)
+    else:
+        values = start + jnp.asarray(change.drift, dtype) * jnp.maximum(t - change.at, 0)
+    return jnp.tile(truth_vector, (n, 1)).at[:, column].set(values.astype(dtype))
+
+
 def simulate_changing(
     params: Float[Array, "T P"], u: Float[Array, " T"], orders: Orders
 ) -> Float[Array, " T"]:

@@ -21,8 +21,7 @@ def exported() -> set[str]:
     return {
         name
         for name in dir(jaxcascade)
-        if not name.startswith("_")
-        and not isinstance(getattr(jaxcascade, name), types.ModuleType)
+        if not name.startswith("_") and not isinstance(getattr(jaxcascade, name), types.ModuleType)
     }
 
 

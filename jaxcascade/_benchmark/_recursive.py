@@ -128,6 +128,7 @@ _BASELINE_SETTINGS = (
     "lam",
     "memory0",
     "growth",
+    "acceleration",
     "first_samples",
     "anti_windup",
     "delta",

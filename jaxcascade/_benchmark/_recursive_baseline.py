@@ -95,7 +95,8 @@ def recursive(
     *,
     lam=1.0,
     memory0=10.0,
-    growth=0.25,
+    growth=0.1,
+    acceleration=3e-4,
     first_samples=400,
     anti_windup="none",
     delta=1e3,
@@ -124,6 +125,7 @@ def recursive(
         if t == first_samples and first_samples > 0:
             P2 = delta * np.eye(2)
             theta = np.concatenate([theta[o.static_dynamic], init_theta[o.backlash]])
+            theta = _hold(theta, theta, init_theta, o, u_min, u_max, init_theta)
             x[max(t - lags, 0) : t] = y[max(t - lags, 0) : t]  # x ~ y before the switch
         p = unpack(_params(_model(theta, init_theta, o)), o)
 
@@ -146,7 +148,9 @@ def recursive(
             parts, o, past(u, 1), y[t], past(y, 1), v_past, x_t, x_past, unit_slopes=True
         )
         error = yc - phi @ theta
-        lam_t = 1.0 if first else min(lam, 1.0 - 1.0 / (memory0 + growth * (t - first_samples)))
+        k = t - first_samples
+        memory = memory0 + growth * k + acceleration * k * k
+        lam_t = 1.0 if first else min(lam, 1.0 - 1.0 / memory)
         new, new_P1, new_P2 = theta.copy(), P1, P2
         trace_max = delta * o.size
         if g1 > 0:
@@ -157,10 +161,30 @@ def recursive(
             new[b1:], new_P2 = _update(
                 theta[b1:], P2, phi[b1:], error, lam_t, anti_windup, trace_max
             )
+        if project and not first:
+            new = _hold(new, theta, init_theta, o, u_min, u_max)
         model = _params(_model(new, init_theta, o))
         if first or not project or is_admissible(model, o, u_min, u_max):
             theta, P1, P2 = new, new_P1, new_P2
     return _vector(_model(theta, init_theta, o))
+
+
+def _hold(new, theta, init_theta, o: Orders, u_min, u_max, fallback=None):
+    """`new` with each breakpoint that is not inside the input range on its side of 0, in
+    order (and every one after it), put back where it is in `theta` (or at `fallback`,
+    the initial values), its `D M` with the new slope."""
+    D_new, D_old = _model(new, init_theta, o), _model(theta, init_theta, o)
+    if fallback is not None:
+        D_old = fallback
+    out = new.copy()
+    for name, M, outward, edge in (("DR", "MR", 1.0, u_max), ("DL", "ML", -1.0, u_min)):
+        s, slope = o.slices[name], new[o.slices[M]][1:]
+        previous, ok = 0.0, True
+        for i, d in enumerate(D_new[s]):
+            ok = ok and outward * (d - previous) > 0 and outward * (edge - d) > 0
+            out[s.start + i] = (d if ok else D_old[s.start + i]) * slope[i]
+            previous = d
+    return out
 
 
 def _is_slope(o: Orders) -> np.ndarray:

@@ -33,7 +33,9 @@ def spec_from_args(args):
     if args.example is not None and args.system is not None:
         raise CLIError("give either --example or --system, not both.")
     if args.example is not None:
-        data.pop("system", None)
+        system = data.pop("system", None)
+        if isinstance(system, dict) and "change" in system:
+            data["system"] = {"change": system["change"]}  # the change stays
         data["example"] = args.example
     if args.system is not None:
         data.pop("example", None)
@@ -133,6 +135,30 @@ def _experiment_line(spec, summary) -> str:
     )
 
 
+def _tracking(spec, table, out, plots) -> None:
+    """A system that changes: the tracking summary (`OUT.tracking.csv`), the true
+    parameters at the recorded samples (`OUT.trajectory.csv`) and, with `--plots`, the
+    median error trajectories with quantile bands."""
+    from .._montecarlo._tables import tracking_summary, true_trajectory
+
+    summary = tracking_summary(table)
+    path = out.with_name(out.name.removesuffix(".parquet") + ".tracking.csv")
+    summary.to_csv(path, index=False)
+    truth = true_trajectory(spec)
+    truth_path = out.with_name(out.name.removesuffix(".parquet") + ".trajectory.csv")
+    truth.to_csv(truth_path, index=False)
+    columns = ["n", "snr", "before_change_rate", "reentered_rate", "settled_rate"]
+    columns += ["reentry_median", "steady_rmse", "steady_rmse_changed"]
+    print(summary[columns].to_string(index=False, float_format=lambda v: f"{v:.4g}"))
+    print(f"written: {path}, {truth_path}")
+    if plots:
+        from .._plot._tracking import tracking_figures
+
+        stem = out.name.removesuffix(".parquet")
+        paths = tracking_figures(spec, table, plots, stem)
+        print(f"plots: {', '.join(str(p) for p in paths)}")
+
+
 def sweep(args) -> int:
     # imported here, not at the top: `--help` answers without importing JAX
     from .._montecarlo._run import run, summary_path
@@ -176,6 +202,8 @@ def sweep(args) -> int:
     if spec.input != "uniform" or spec.noise != "white":
         print(_experiment_line(spec, summary))
     print(f"written: {out}, {summary_path(out)}")
+    if spec.change is not None:
+        _tracking(spec, table, out, args.plots)
     if args.plots:
         stem = out.name.removesuffix(".parquet")
         old = set(sweep_figures(args.plots, stem))

@@ -35,28 +35,61 @@ approximation), and the full recursion starts. Only samples up to t ever enter t
 estimate at t: the whole procedure is on-line.
 
 **Forgetting** (`_online.forgetting`): the memory `1 / (1 - lam_k)` starts at
-`memory0` samples and grows by `growth` per sample up to `1 / (1 - lam)`. `lam = 1`: a
-factor that tends to 1, for a system that does not change (early regressors, built from
-poor estimates, fade like a power of the elapsed fraction of the record); `lam < 1`: a
-constant memory, for tracking (and, noise-free, exact convergence: the start is
-forgotten exponentially). Default: `lam = 1`, `memory0 = 10`, `growth = 0.25`, the
-schedule `lam_k = 1 - 1 / (10 + 0.25 k)` that tends to 1 (after the first iteration,
-whose information is kept, a short memory forgets the poorest regressors quickly; the
-slow growth keeps forgetting the transient while the weights flatten). Chosen among
-about ten schedules on 64 Example 1 records at SNR 25 (the final RMSE closest to the batch
-iteration's), then measured on 200 others (`results/recursive_vs_batch.md`).
+`memory0` samples and grows by `growth k + acceleration k^2` after k samples, up to
+`1 / (1 - lam)`. `lam = 1`: a factor that tends to 1, for a system that does not change;
+`lam < 1`: a constant memory, for tracking (and, noise-free, exact convergence: the
+start is forgotten exponentially). Default: `lam = 1`, `memory0 = 10`, `growth = 0.1`,
+`acceleration = 3e-4`: `lam_k = 1 - 1 / (10 + 0.1 k + 3e-4 k^2)`, which tends to 1.
+Why: early regressors are built from poor estimates and must fade, but a memory that
+grows only linearly (`growth g`) weighs sample s at time k by `(s / k)^(1 / g)`, so it
+keeps paying for the transient with variance (`g = 0.25`: the last quarter of the
+record carries most of the weight; the RMSE of the final estimate 1.4-1.7 times the
+batch iteration's). A memory that grows like `k^2` forgets sample s by `exp(-(1/s -
+1/k) / acceleration)`: the start (s below about `1 / acceleration` = 3300 samples) fades,
+the rest of the record tends to equal weights. The linear term keeps the memory short
+while the estimate converges. Chosen among about twenty schedules on 64 Example 1
+records at SNR 25 (records 0..63: the largest RMSE ratio to the batch iteration's over
+the parameters, 1.68 for `g = 0.25` alone, 1.41 for this one), then measured on 200
+others (`results/recursive_vs_batch.md`).
+
+**The gain's regressor** (`gradient`). The recursion above is a pseudo-linear
+regression: `phi(t)` is built from the current estimate and then treated as data, so the
+dependence of `v`, `x` and so of `phi(t) theta` on theta is ignored. Near the truth the
+error then contracts only by the paper's fixed-point map, and on short memories slowly:
+noise-free Example 2 from up to 1 % off the truth (`lam = 0.99`), none of 200 records
+reached 1e-6 by N = 2000 (76 % 1e-3). On one record tried at `lam = 0.95`, putting in
+the true `x` took the final error from 1e-8 to 1e-12 and the true `v` changed nothing:
+the slow mode is `x`'s dependence on theta through the linear block's recursion. With
+`gradient=True` the gain uses instead `psi(t)`, the total derivative of the key-term
+prediction `phi(t) theta` with respect to theta (with `x(t)`'s sensitivity carried
+through eq. 22's recursion, the switching functions held: they are piecewise
+constant), and one full `P`: the recursive prediction-error (Gauss-Newton) form of the
+same regression (Ljung and Söderström 1983): near the truth its steps are Gauss-Newton
+steps on the prediction error, not steps of the fixed-point map. The error it corrects
+is the same `yc(t) - phi(t) theta`, so the truth stays an exact fixed point. From the
+same starts 189 of the 200 reached 1e-6 (all 1e-3).
 
 **What is measured** (`benchmarks/recursive_noise_free.py`, `recursive_vs_batch.py`).
 The true parameters are an exact fixed point (zero a-priori error at every sample,
-noise-free). Noise-free, one on-line pass from the paper's initial values reaches 1e-6
-on every one of 100 Example 1 records at N = 4000 with `lam = 0.98` or `0.95`; on
-Example 2 at N = 2000 on at most about a fifth (`lam = 0.93`; a third of the records
-never come within 0.05: the paper's fixed-point map contracts only when each of its
-steps sees a long record, and its batch steps on 200-sample segments do not converge
-even from 1% off the truth). At SNR 25 the final estimate of the default schedule has
-0.89 to 1.54 times the batch iteration's RMSE per parameter on Example 1. `passes > 1`
-(off-line) recovers most records exactly. `project` keeps the estimate admissible
-(Ljung's projection).
+noise-free). Noise-free, one on-line pass from the paper's initial values: with
+`gradient=True, lam = 0.95` (memory 20 samples) every one of 200 records of each example
+reaches 1e-6 within the paper's N (4000, 2000; 199 of Example 2's at `lam = 0.93`); with
+the key-term regressor, 198 of Example 1's at `lam = 0.98` but at most 14 % of Example
+2's (`lam = 0.93`), whose g1 regime (the only one that informs the static and linear
+blocks) holds 28 % of its samples against 43 % in Example 1 (true switches, 20 records),
+over half the length (`results/recursive_noise_free.md`). Noise-free the
+factor is constant, below 1: with no noise to average, the only error left is that of
+the early regressors, which a constant memory forgets exponentially; the default
+schedule, which tends to 1, keeps a remnant of them (median largest error 5e-4 on
+Example 1). At SNR 25 the final estimate's RMSE per parameter is 0.85 to 1.30 times
+the batch iteration's on 200 Example 1 records with the defaults, 0.30 to 1.12 times
+with `gradient=True` (`results/recursive_vs_batch.md`). `passes > 1` (off-line)
+recovers most records exactly. `project` keeps the estimate admissible (Ljung's
+projection); a breakpoint that would leave the input range is held instead (a slope
+estimated at exactly 0, a segment the first iteration never saw, leaves `D M / M`
+undefined: rejecting every update that moved it froze 5 of 60 Example 2 records at the
+first iteration's estimate), and the first iteration's breakpoints outside the range go
+back to their initial values.
 """
 
 from __future__ import annotations
@@ -104,7 +137,8 @@ def recursive(
     *,
     lam: float = 1.0,
     memory0: float = 10.0,
-    growth: float = 0.25,
+    growth: float = 0.1,
+    acceleration: float = 3e-4,
     first_samples: int = 400,
     anti_windup: str = "none",
     delta: float = 1e3,
@@ -114,6 +148,7 @@ def recursive(
     project: bool = True,
     passes: int = 1,
     input_range: tuple[float, float] | None = None,
+    gradient: bool = False,
 ) -> Recursion:
     """The recursive least-squares form of the paper's estimator on one record.
 
@@ -122,8 +157,9 @@ def recursive(
     - `u`, `y`: input and measured output (checked by `_validate.record`).
     - `orders`: static model orders.
     - `init`: initial values; default `initial_guess(orders, min(u), max(u))`.
-    - `lam`, `memory0`, `growth`: the forgetting schedule `lam_k = min(lam, 1 - 1 /
-      (memory0 + growth k))` (`_online.forgetting`), k the samples since the start.
+    - `lam`, `memory0`, `growth`, `acceleration`: the forgetting schedule `lam_k =
+      min(lam, 1 - 1 / (memory0 + growth k + acceleration k^2))` (`_online.forgetting`),
+      k the samples since the first iteration.
     - `first_samples`: samples of the on-line first iteration (module docstring).
     - `anti_windup`: `"none"` (default: exponential forgetting, each block forgotten
       only where it is active, which already keeps the dead zone from winding `P` up),
@@ -132,8 +168,14 @@ def recursive(
     - `divergence_bound`: an estimate larger than this is `diverged`.
     - `every`: keep the estimate every `every` samples (0: only the final one).
     - `errors`: also return the a-priori prediction errors (of the last pass).
-    - `project`: Ljung's projection: an update that would leave the model's domain is
-      not taken (default on).
+    - `project`: Ljung's projection (default on): an update that would leave the
+      model's domain is not taken, except that a breakpoint that would leave the input
+      range is held where it is and the rest of the update taken.
+    - `gradient`: the gain's regressor (module docstring). False (default): `phi(t)`,
+      the key-term regressor (the paper's least squares, a pseudo-linear regression);
+      True: the gradient of the key-term prediction `phi(t) theta` with respect to
+      theta, the internal variables' dependence on theta included (the recursive
+      prediction-error form); about 1.5 times slower per sample.
     - `passes`: 1 (default): one pass over the record, on-line. More passes run the
       recursion over the record again, carrying the estimate and `P` (each pass starts
       the signals from rest): an off-line use of the recursion, NOT on-line
@@ -151,7 +193,9 @@ def recursive(
     u, y = record(u, y, orders=orders, where="recursive")
     if init is not None and not isinstance(init, CascadeParams):
         raise TypeError(f"recursive: init must be CascadeParams, got {type(init).__name__}.")
-    check_settings(lam, memory0, growth, first_samples, anti_windup, delta, every, passes)
+    check_settings(
+        lam, memory0, growth, first_samples, anti_windup, delta, every, passes, acceleration
+    )
     if first_samples >= u.shape[0]:
         raise ValueError(
             f"recursive: first_samples = {first_samples} leaves nothing of a record of "
@@ -166,6 +210,7 @@ def recursive(
         lam=lam,
         memory0=memory0,
         growth=growth,
+        acceleration=acceleration,
         first_samples=first_samples,
         anti_windup=anti_windup,
         delta=delta,
@@ -174,10 +219,13 @@ def recursive(
         errors=errors,
         project=project,
         passes=passes,
+        gradient=gradient,
     )
 
 
-def check_settings(lam, memory0, growth, first_samples, anti_windup, delta, every, passes=1):
+def check_settings(
+    lam, memory0, growth, first_samples, anti_windup, delta, every, passes=1, acceleration=0.0
+):
     """A `ValueError` naming the first bad setting (checked once, before tracing)."""
     if not 0 < lam <= 1:
         raise ValueError(f"recursive: lam must lie in (0, 1], got {lam}.")
@@ -185,6 +233,8 @@ def check_settings(lam, memory0, growth, first_samples, anti_windup, delta, ever
         raise ValueError(f"recursive: memory0 must be at least 1 sample, got {memory0}.")
     if not growth >= 0:
         raise ValueError(f"recursive: growth must be non-negative, got {growth}.")
+    if not acceleration >= 0:
+        raise ValueError(f"recursive: acceleration must be non-negative, got {acceleration}.")
     if isinstance(first_samples, bool) or not isinstance(first_samples, int | np.integer):
         raise TypeError(f"recursive: first_samples must be an integer, got {first_samples!r}.")
     if first_samples < 0:
@@ -239,6 +289,28 @@ def _divide_breakpoints(theta, init_theta, orders):
     return out
 
 
+def _hold_breakpoints(proposal, proposed_D, held_at, init_theta, orders, u_min, u_max):
+    """`proposal` (breakpoints as `D M`; `proposed_D` the same with `D`, `model`'s
+    output) with each breakpoint that is not inside the input range on its side of 0,
+    in order (and every one after it), held at its value in `held_at` (`D`
+    coordinates): its `D M` becomes that `D` times the proposed slope. Slopes and
+    everything else unchanged. Returns the held proposal and its `D` form (a held
+    breakpoint whose proposed slope is 0 at its initial value, as `model` gives it)."""
+    s = orders.slices
+    out, out_D = proposal, proposed_D
+    for name, M, outward, edge in (("DR", "MR", 1.0, u_max), ("DL", "ML", -1.0, u_min)):
+        d, slope = proposed_D[s[name]], proposal[s[M]][1:]
+        previous = jnp.concatenate([jnp.zeros((1,), d.dtype), d[:-1]])
+        ok = (outward * (d - previous) > 0) & (outward * (edge - d) > 0)
+        ok = jnp.cumprod(ok) > 0
+        held = held_at[s[name]]
+        out = out.at[s[name]].set(jnp.where(ok, d, held) * slope)
+        out_D = out_D.at[s[name]].set(
+            jnp.where(ok, d, jnp.where(slope != 0, held, init_theta[s[name]]))
+        )
+    return out, out_D
+
+
 def _multiply_breakpoints(theta, orders):
     s = orders.slices
     out = theta
@@ -256,6 +328,7 @@ def _multiply_breakpoints(theta, orders):
         "errors",
         "project",
         "passes",
+        "gradient",
     )
 )
 def _recursive(
@@ -268,6 +341,7 @@ def _recursive(
     lam,
     memory0,
     growth,
+    acceleration,
     first_samples: int,
     anti_windup: str,
     delta,
@@ -276,6 +350,7 @@ def _recursive(
     errors: bool,
     project: bool,
     passes: int,
+    gradient: bool = False,
 ) -> Recursion:
     o = orders
     dtype = u.dtype
@@ -300,23 +375,33 @@ def _recursive(
     def model(theta):
         return _divide_breakpoints(theta, init_theta, o)
 
+    def at_switch(theta):
+        # the end of the first iteration: its NS and LD estimates and their information
+        # stay (breakpoints outside the range back at their initial values), the
+        # backlash restarts at its initial values
+        kept = jnp.concatenate([theta[o.static_dynamic], init_theta[o.backlash]])
+        return _hold_breakpoints(kept, model(kept), init_theta, init_theta, o, u_min, u_max)[0]
+
     def step(carry, inputs):
-        theta, P1, P2, u_past, y_past, x_past, sq = carry
+        theta, P1, P2, u_past, y_past, x_past, extra, sq = carry
         k, u_t, y_t, valid = inputs  # k: samples since the start, over all passes
         t = k % T
         first = k < first_samples
         switch = (k == first_samples) & (first_samples > 0)
-        # the end of the first iteration: its NS and LD estimates and their information
-        # stay, the backlash restarts at its initial values
-        kept = jnp.concatenate([theta[o.static_dynamic], init_theta[o.backlash]])
-        theta = jnp.where(switch, kept, theta)
+        # (`switch` does not depend on the record: a real branch under `vmap`)
+        theta = jax.lax.cond(switch, at_switch, lambda theta: theta, theta)
         P2 = jnp.where(switch, delta * jnp.eye(2, dtype=dtype), P2)
         x_past = jnp.where(switch, y_past, x_past)
         # a new pass starts from rest, as the record does
         restart = (t == 0) & (k > 0)
         u_past, y_past, x_past = (jnp.where(restart, 0.0, z) for z in (u_past, y_past, x_past))
+        if gradient:
+            Pf, S = extra
+            Pf = jnp.where(switch, jax.scipy.linalg.block_diag(P1, P2), Pf)
+            S = jnp.where(switch | restart, 0.0, S)
 
-        params = _params(model(theta), o)
+        current_D = model(theta)
+        params = _params(current_D, o)
         u_w = jnp.concatenate([u_past, u_t[None]])
         y_w = jnp.concatenate([y_past, y_t[None]])
         v_w = pwl(params, u_w)  # eq. 21 at the window's inputs
@@ -334,7 +419,8 @@ def _recursive(
             unit_slopes=True,
         )
         error = yc - phi @ theta
-        lam_k = jnp.where(first, 1.0, forgetting(k - first_samples, lam, memory0, growth))
+        lam_k = forgetting(k - first_samples, lam, memory0, growth, acceleration)
+        lam_k = jnp.where(first, 1.0, lam_k)
         new1, new_P1 = update(
             theta[:b1],
             P1,
@@ -356,16 +442,55 @@ def _recursive(
             trace_max=trace_max,
         )
         proposal = jnp.concatenate([new1, new2])
+        if gradient:
+
+            def predict(theta_, x_past_):
+                p_ = _params(model(theta_), o)
+                v_ = pwl(p_, u_w)
+                a_ = jnp.concatenate([jnp.ones((1,), dtype), p_.a])
+                x_ = a_ @ v_[W - 2 :: -1][: o.r] - p_.b @ x_past_[::-1][: o.p]
+                phi_ = sample_regression(
+                    p_, u_w, y_w, v_, jnp.concatenate([x_past_, x_[None]]), unit_slopes=True
+                )[0]
+                return jnp.stack([phi_ @ theta_, x_])
+
+            J_theta, J_x = jax.jacfwd(predict, argnums=(0, 1))(theta, x_past)
+            total = J_theta + J_x @ S
+            psi, dx_t = total[0], total[1]
+            newf, new_Pf = update(
+                theta,
+                Pf,
+                psi,
+                error,
+                lam_k,
+                valid & ~first & (g1 + g2 > 0),
+                anti_windup=anti_windup,
+                trace_max=trace_max,
+            )
+            proposal = jnp.where(first, proposal, newf)
         if project:
             # Ljung's projection: an update that takes the estimate out of the model's
             # domain (a breakpoint outside the input range, mR <= 0, an unstable linear
             # block) is not taken. The first iteration's coefficients are no model yet.
-            keep = first | is_admissible(_params(model(proposal), o), u_min, u_max)
+            # A breakpoint that would leave the range is held where it is and the rest
+            # of the update taken: a slope estimated at exactly 0 (a segment the first
+            # iteration never saw) leaves its `D M / M` undefined, and rejecting every
+            # update that moves it froze the whole estimate (Example 2, 5 of 60 records).
+            proposed_D = model(proposal)
+            held, held_D = _hold_breakpoints(
+                proposal, proposed_D, current_D, init_theta, o, u_min, u_max
+            )
+            proposal = jnp.where(first, proposal, held)
+            keep = first | is_admissible(_params(held_D, o), u_min, u_max)
         else:
             keep = jnp.asarray(True)
         theta = jnp.where(keep, proposal, theta)
         P1 = jnp.where(keep, new_P1, P1)
         P2 = jnp.where(keep, new_P2, P2)
+        if gradient:
+            Pf = jnp.where(keep, new_Pf, Pf)
+            S = jnp.where(valid, jnp.concatenate([S[1:], dx_t[None]]), S)
+            extra = (Pf, S)
         u_past = jnp.where(valid, u_w[1:], u_past)
         y_past = jnp.where(valid, y_w[1:], y_past)
         x_past = jnp.where(valid, x_w[1:], x_past)
@@ -377,7 +502,7 @@ def _recursive(
         )
         sq = sq + jnp.where(valid & (~first | ~finite_error), counted, 0.0)
         estimate = jnp.where(first, _after_first(theta, init_theta, o), model(theta))
-        return (theta, P1, P2, u_past, y_past, x_past, sq), (estimate, error)
+        return (theta, P1, P2, u_past, y_past, x_past, extra, sq), (estimate, error)
 
     zeros = jnp.zeros((W - 1,), dtype)
     carry = (
@@ -387,6 +512,9 @@ def _recursive(
         zeros,
         zeros,
         zeros,
+        (delta * jnp.eye(o.size, dtype=dtype), jnp.zeros((W - 1, o.size), dtype))
+        if gradient
+        else (),
         jnp.zeros((3,), dtype),
     )
     total = passes * T
@@ -465,12 +593,14 @@ class Recursive(Estimator):
     lam: float = setting(_RECURSIVE["lam"])
     memory0: float = setting(_RECURSIVE["memory0"])
     growth: float = setting(_RECURSIVE["growth"])
+    acceleration: float = setting(_RECURSIVE["acceleration"])
     first_samples: int = setting(_RECURSIVE["first_samples"])
     anti_windup: str = setting(_RECURSIVE["anti_windup"])
     delta: float = setting(_RECURSIVE["delta"])
     divergence_bound: float = setting(_RECURSIVE["divergence_bound"])
     project: bool = setting(_RECURSIVE["project"])
     passes: int = setting(_RECURSIVE["passes"])
+    gradient: bool = setting(_RECURSIVE["gradient"])
     every: int = setting(_RECURSIVE["every"])
 
     def __check_init__(self):
@@ -483,6 +613,7 @@ class Recursive(Estimator):
             self.delta,
             self.every,
             self.passes,
+            self.acceleration,
         )
 
     def __call__(
@@ -509,12 +640,14 @@ class Recursive(Estimator):
             lam=self.lam,
             memory0=self.memory0,
             growth=self.growth,
+            acceleration=self.acceleration,
             first_samples=self.first_samples,
             anti_windup=self.anti_windup,
             delta=self.delta,
             divergence_bound=self.divergence_bound,
             project=self.project,
             passes=self.passes,
+            gradient=self.gradient,
             every=self.every,
             input_range=input_range,
         ).solution

@@ -39,6 +39,17 @@ computed too), and `compile_seconds` the time this chunk spent compiling (0 when
 executable was already there). Both vary from run to run; `TIMING_COLUMNS` names them,
 and `without_timing` drops them to compare tables exactly.
 
+**Systems that change** (`Spec.change`, `_changing`). The record comes from the
+trajectory of true parameters (`simulate_changing`), the validation record from the
+system at the end, and the estimator (`recursive`, keeping its estimate every `every`
+samples) returns its trajectory: per realisation the error `estimate - truth(t)` at the
+recorded samples (`tracking_samples`), and from it the tracking measures of
+`_tracking` (samples to re-entry within 0.05 of the new truth, whether it settled, the
+steady RMSE after re-entry, whether it was within the band before the change). The
+change enters the cell identity, so its records differ from those of the unchanged
+system (and a spec without a change keeps its keys). No Cramér-Rao bound is computed
+for a changing system.
+
 **Memory.** Peak memory of a chunk grows as `chunk_size x N` (each realisation holds a
 few `N x P` regression matrices and signals of length N); `chunk_memory` reports
 XLA's buffer sizes for a cell and chunk size.
@@ -57,6 +68,7 @@ import jax.numpy as jnp
 import numpy as np
 import pandas as pd
 
+from .._changing import Change, simulate_changing, trajectory_traced
 from .._compile import compiler_options
 from .._efficiency import crlb, noise_bound_options
 from .._estimator import estimator, is_host
@@ -95,6 +107,8 @@ def cell_identity(spec: Spec, cell: Cell) -> str:
     if spec.noise != "white":
         identity["noise"] = spec.noise
         identity["noise_settings"] = _exact(dict(spec.noise_settings))
+    if spec.change is not None:
+        identity["change"] = _change_identity(spec.change)
     return json.dumps(identity, sort_keys=True)
 
 
@@ -107,6 +121,21 @@ def _exact(value):
     if isinstance(value, float):
         return value.hex()
     return value
+
+
+def _change_identity(change: Change) -> dict:
+    out = {"parameter": change.parameter, "at": int(change.at)}
+    for name in ("to", "drift"):
+        value = getattr(change, name)
+        if value is not None:
+            out[name] = float(value).hex()
+    return out
+
+
+def tracking_samples(n: int, every: int) -> np.ndarray:
+    """The samples (1-based counts) after which `recursive` with `every` records its
+    estimate on a record of `n` samples (the last row: the final estimate)."""
+    return np.minimum(np.arange(1, -(-n // every) + 1) * every, n)
 
 
 def cell_key(spec: Spec, cell: Cell):
@@ -122,15 +151,28 @@ def _system_tag(family: str) -> np.uint32:
 
 
 def _draw(
-    cell_key, index, truth_vector, snr, design_arrays, *, orders, n, design_static, noise, family
+    cell_key,
+    index,
+    truth_vector,
+    snr,
+    design_arrays,
+    *,
+    orders,
+    n,
+    design_static,
+    noise,
+    family,
+    change=None,
 ):
     """One realisation's records: the input from the design, the noisy output, the
     record's Cramér-Rao bound of the cell's noise, and the fresh validation record of the
-    same design and noise (module docstring). With a `family`, `truth_vector` only gives
-    the dtype: the true system is drawn from the family's prior with a key folded from
-    the realisation key. The input design arrives in two parts: its arrays (a measured
-    record) as an argument, the rest closed over (`eqx.partition`), so no large constant
-    is compiled into the program."""
+    same design and noise (module docstring). With a `change`, the output comes from the
+    trajectory of true systems (`truths`, returned in place of the bound) and the
+    validation record and `truth` from the system at the end. With a `family`,
+    `truth_vector` only gives the dtype: the true system is drawn from the family's
+    prior with a key folded from the realisation key. The input design arrives in two
+    parts: its arrays (a measured record) as an argument, the rest closed over
+    (`eqx.partition`), so no large constant is compiled into the program."""
     dtype = truth_vector.dtype
     design = eqx.combine(design_arrays, design_static)
     key = jax.random.fold_in(cell_key, index)
@@ -140,12 +182,18 @@ def _draw(
     truth = CascadeParams.from_vector(truth_vector, orders, check=False)
     key_u, key_e, key_u_val, key_e_val = jax.random.split(key, 4)
     u = design(key_u, n, dtype)
-    y = add_noise(key_e, simulate(truth, u), snr, noise)
+    if change is None:
+        y = add_noise(key_e, simulate(truth, u), snr, noise)
+    else:  # the record from the trajectory; validation and truth: the system at the end
+        truths = trajectory_traced(truth_vector, change, n, orders)
+        y = add_noise(key_e, simulate_changing(truths, u, orders), snr, noise)
+        truth_vector = truths[-1]
+        truth = CascadeParams.from_vector(truth_vector, orders, check=False)
     u_val = design(key_u_val, n, dtype)
     y_val = add_noise(key_e_val, simulate(truth, u_val), snr, noise)
     low, high = design.input_range(u)
     input_rms = jnp.sqrt(jnp.mean(u**2))
-    return {
+    drawn = {
         "key": key,
         "u": u,
         "y": y,
@@ -154,13 +202,17 @@ def _draw(
         "truth": truth_vector,
         "input_low": jnp.asarray(low, dtype),
         "input_high": jnp.asarray(high, dtype),
-        # the record's own Cramér-Rao bound of its noise (noise-free: 0): coloured for
-        # ar/arma noise, the Gaussian one of the noise's variance for white, Student-t
-        # and outliers (`_efficiency`)
-        "crlb": crlb(truth, u, snr=snr, **noise_bound_options(noise)),
         "input_rms": input_rms,
         "input_crest": jnp.max(jnp.abs(u)) / input_rms,
     }
+    if change is None:
+        # the record's own Cramér-Rao bound of its noise (noise-free: 0): coloured for
+        # ar/arma noise, the Gaussian one of the noise's variance for white, Student-t
+        # and outliers (`_efficiency`); none for a system that changes
+        drawn["crlb"] = crlb(truth, u, snr=snr, **noise_bound_options(noise))
+    else:
+        drawn["truths"] = truths
+    return drawn
 
 
 def _score(estimate, truth_vector, u_val, y_val, input_range, *, orders):
@@ -177,10 +229,10 @@ def _score(estimate, truth_vector, u_val, y_val, input_range, *, orders):
     return jnp.where(admissible & jnp.isfinite(error), error, jnp.inf), admissible
 
 
-def _outputs(drawn, solution, estimate, error, admissible):
+def _outputs(drawn, solution, estimate, error, admissible, every=None):
     key = drawn["key"]
     dtype = drawn["truth"].dtype
-    return {
+    out = {
         "key": jax.random.key_data(key) if _is_typed(key) else key,
         "estimate": estimate,
         "status": jnp.asarray(solution.status).astype(jnp.int32),
@@ -191,10 +243,16 @@ def _outputs(drawn, solution, estimate, error, admissible):
         "nrmse": error,
         "admissible": admissible,
         "truth": drawn["truth"],
-        "crlb": drawn["crlb"],
         "input_rms": drawn["input_rms"],
         "input_crest": drawn["input_crest"],
     }
+    if "crlb" in drawn:
+        out["crlb"] = drawn["crlb"]
+    else:  # a system that changes: the error at the samples the estimator recorded
+        truths = drawn["truths"]
+        samples = tracking_samples(truths.shape[0], every)
+        out["track"] = solution.history[1:].astype(dtype) - truths[samples - 1]
+    return out
 
 
 def _realisation(
@@ -211,6 +269,7 @@ def _realisation(
     fit,
     fit_key_tag,
     family,
+    change=None,
 ):
     """One record: input, noisy output, fit, validation on a fresh record (`_draw`, the
     estimator, `_score`)."""
@@ -225,6 +284,7 @@ def _realisation(
         design_static=design_static,
         noise=noise,
         family=family,
+        change=change,
     )
     design = eqx.combine(design_arrays, design_static)
     input_range = design.input_range(drawn["u"])
@@ -239,7 +299,8 @@ def _realisation(
     error, admissible = _score(
         estimate, drawn["truth"], drawn["u_val"], drawn["y_val"], input_range, orders=orders
     )
-    return _outputs(drawn, solution, estimate, error, admissible)
+    every = None if change is None else fit.every
+    return _outputs(drawn, solution, estimate, error, admissible, every)
 
 
 def _is_typed(key) -> bool:
@@ -252,7 +313,7 @@ def _split(design):
 
 
 @functools.lru_cache(maxsize=64)
-def _compiled(orders, n, experiment, name, settings, batched, family=None):
+def _compiled(orders, n, experiment, name, settings, batched, family=None, change=None):
     """The jitted (optionally vmapped) realisation function of one cell shape;
     `experiment` is the spec's `_experiment` (input and noise, hashable)."""
     spec_input, input_settings, spec_noise, noise_settings = experiment
@@ -269,6 +330,7 @@ def _compiled(orders, n, experiment, name, settings, batched, family=None):
         fit=estimator(name, **dict(settings)),
         fit_key_tag=np.uint32(_hash_words(f"estimator:{name}")[0]),
         family=family,
+        change=change,
     )
     if batched:
         one = jax.vmap(one, in_axes=(None, 0, None, None, None))
@@ -305,6 +367,7 @@ def _function(spec: Spec, cell: Cell, batched: bool):
         settings,
         batched,
         spec.family,
+        spec.change,
     )
 
 
@@ -324,6 +387,7 @@ def _executable(spec: Spec, cell: Cell, arguments) -> tuple:
         cell.estimator,
         spec.estimator_settings(cell.estimator),
         spec.family,
+        spec.change,
         indices.shape,
         str(truth.dtype),
         str(key.dtype),
@@ -341,8 +405,9 @@ def _executable(spec: Spec, cell: Cell, arguments) -> tuple:
 
 
 @functools.lru_cache(maxsize=16)
-def _host_programs(orders, n, experiment, family):
-    """The batched draw and score of a cell shape whose estimator runs on the host."""
+def _host_programs(orders, n, experiment, family, change=None):
+    """The batched draw and score of a cell shape whose estimator runs on the host (or
+    whose records `records` returns)."""
     spec_input, input_settings, spec_noise, noise_settings = experiment
     from .._disturbance import disturbance
     from .._inputs import input_design
@@ -355,6 +420,7 @@ def _host_programs(orders, n, experiment, family):
         design_static=_split(design)[1],
         noise=disturbance(spec_noise, **dict(noise_settings)),
         family=family,
+        change=change,
     )
     score = functools.partial(_score, orders=orders)
     options = compiler_options()
@@ -370,11 +436,12 @@ def _host_chunk(spec: Spec, cell: Cell, fit, indices: np.ndarray, size: int) -> 
     cell compiles once), the fits run one record after another on the host, each timed
     (`fit_seconds` per row)."""
     experiment = _experiment(spec)
-    draw, score = _host_programs(spec.orders, cell.n, experiment, spec.family)
+    draw, score = _host_programs(spec.orders, cell.n, experiment, spec.family, spec.change)
     padded = np.concatenate([indices, np.full(size - indices.size, indices[-1])])
     key, truth, snr, arrays = _arguments(spec, cell)
     arguments = (key, jnp.asarray(padded.astype(np.uint32)), truth, snr, arrays)
-    cache_key = ("host", spec.orders, cell.n, experiment, spec.family, size, str(truth.dtype))
+    shape = (spec.orders, cell.n, experiment, spec.family, spec.change, size)
+    cache_key = ("host", *shape, str(truth.dtype))
     compile_seconds = 0.0
     if cache_key not in _EXECUTABLES:
         start = time.perf_counter()
@@ -440,7 +507,7 @@ def records(spec: Spec, cell: Cell, indices) -> dict[str, np.ndarray]:
     their validation records (`u_val`, `y_val`): the same for every estimator of a
     sweep, for checking a table's rows against direct fits."""
     indices = np.asarray(indices, np.int64)
-    draw, _ = _host_programs(spec.orders, cell.n, _experiment(spec), spec.family)
+    draw, _ = _host_programs(spec.orders, cell.n, _experiment(spec), spec.family, spec.change)
     key, truth, snr, arrays = _arguments(spec, cell)
     drawn = jax.device_get(draw(key, jnp.asarray(indices.astype(np.uint32)), truth, snr, arrays))
     return {name: np.asarray(drawn[name]) for name in ("u", "y", "u_val", "y_val")}
@@ -515,7 +582,8 @@ def chunk_memory(spec: Spec, cell: Cell, chunk_size: int | None = None) -> dict[
     key, truth, snr, arrays = _arguments(spec, cell)
     indices = jnp.zeros((size,), jnp.uint32)
     if is_host(_fit(spec, cell)):  # the compiled part is the draw (and the small score)
-        program = _host_programs(spec.orders, cell.n, _experiment(spec), spec.family)[0]
+        experiment = _experiment(spec)
+        program = _host_programs(spec.orders, cell.n, experiment, spec.family, spec.change)[0]
     else:
         program = _function(spec, cell, batched=True)
     compiled = program.lower(key, indices, truth, snr, arrays).compile()

@@ -41,6 +41,11 @@ TOML layout (every key optional except the system):
 
     [estimator.literal]              # settings passed to the estimator
     max_iterations = 50
+
+    [system.change]                  # optional: a system that changes (`_changing`)
+    parameter = "cR"                 # steps at sample `at` to `to`, or drifts by
+    at = 2000                        # `drift` per sample from `at` on; only the
+    to = 0.45                        # on-line estimator `recursive` runs on it
 """
 
 from __future__ import annotations
@@ -55,6 +60,7 @@ from typing import Any, NamedTuple
 
 import jax.numpy as jnp
 
+from .._changing import Change, trajectory
 from .._disturbance import NOISES, Disturbance, disturbance
 from .._estimator import estimator
 from .._examples import EXAMPLES
@@ -164,6 +170,10 @@ class Spec:
       or `None` to run them in this process. Like `chunk_size` it is how the sweep runs,
       not what it computes: it never changes a result, and it is left out of the
       identity that a resumed run must match.
+    - `change`: a `Change` (or its `[system.change]` table) of a fixed system: the
+      records come from the changed system (`_changing`), `true_<name>` is the system at
+      the end, and the tracking columns (`_engine`) are filled. Only `recursive` runs
+      on it; its `every` (the spacing of the recorded trajectory) defaults to 10.
     """
 
     example: int | None = None
@@ -183,6 +193,7 @@ class Spec:
     settings: Mapping[str, Mapping[str, Any]] = dataclasses.field(default_factory=dict)
     chunk_size: int = 64
     scheduler: str | None = None
+    change: Change | Mapping | None = None
 
     def __post_init__(self):
         set_ = object.__setattr__
@@ -277,6 +288,31 @@ class Spec:
             settings[name] = frozen
         set_(self, "settings", settings)
         self._warn_breakpoints(design)
+        if self.change is not None:
+            self._check_change()
+
+    def _check_change(self) -> None:
+        change = self.change
+        if isinstance(change, Mapping):
+            change = Change.from_table(change)
+        if not isinstance(change, Change):
+            raise ValueError("Spec field 'change' must be a [system.change] table.")
+        if self.family is not None:
+            raise ValueError("[system.change] needs a fixed system, not a family.")
+        if self.estimators != ("recursive",):
+            raise ValueError(
+                "[system.change]: only the on-line estimator tracks a change; write "
+                f'estimators = ["recursive"], not {list(self.estimators)}.'
+            )
+        if not change.at < min(self.n):
+            raise ValueError(f"[system.change]: at = {change.at} is not inside N = {min(self.n)}.")
+        trajectory(self.truth(), change, max(self.n))  # unknown name, inadmissible change
+        settings = {**self.settings}
+        settings["recursive"] = {"every": 10, **settings.get("recursive", {})}
+        if settings["recursive"]["every"] < 1 or settings["recursive"].get("passes", 1) != 1:
+            raise ValueError("[system.change]: the recursive estimator needs every >= 1, passes 1.")
+        object.__setattr__(self, "change", change)
+        object.__setattr__(self, "settings", settings)
 
     def _resolve_input_and_noise(self) -> None:
         set_ = object.__setattr__
@@ -390,6 +426,9 @@ class Spec:
             out["system"] = {"family": self.family, "orders": str(self.orders)}
         else:
             out["system"] = {"orders": str(self.orders), "params": dict(self.params)}
+        if self.change is not None:
+            table = {k: v for k, v in dataclasses.asdict(self.change).items() if v is not None}
+            out.setdefault("system", {})["change"] = table
         out["input"] = {"kind": self.input, **_listed(self.input_settings)}
         out["noise"] = {"kind": self.noise, **_listed(self.noise_settings)}
         out["n"] = list(self.n)
@@ -436,9 +475,14 @@ class Spec:
             system = data["system"]
             if isinstance(system, str):  # system = "random"
                 system = {"family": system}
-            system = _table(system, "system", ("params", "orders", "family"))
-            if "params" not in system and "family" not in system:
+            system = _table(system, "system", ("params", "orders", "family", "change"))
+            if "change" in system:
+                kwargs["change"] = _table(system.pop("change"), "system.change", None)
+                if "example" in data and not system:
+                    system = None  # [system] holds only the change of an example
+            if system is not None and "params" not in system and "family" not in system:
                 raise ValueError("Spec table [system] needs 'params' or 'family'.")
+            system = system or {}
             if "params" in system:
                 kwargs["params"] = system["params"]
             if "family" in system:

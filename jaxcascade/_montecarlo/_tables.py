@@ -94,7 +94,7 @@ def realisation_frame(spec, cell, indices, outputs: dict) -> pd.DataFrame:
     names = spec.orders.names
     estimates = np.asarray(outputs["estimate"], dtype=np.float64)
     count = len(indices)
-    if spec.family is not None:  # each row has its own true system
+    if spec.family is not None or spec.change is not None:  # each row's own (final) truth
         truth = np.asarray(outputs["truth"], dtype=np.float64).reshape(count, len(names))
     else:
         values = spec.true_values()
@@ -134,11 +134,92 @@ def realisation_frame(spec, cell, indices, outputs: dict) -> pd.DataFrame:
     for name in ("input_rms", "input_crest"):
         if name in outputs:
             columns[name] = np.asarray(outputs[name], dtype=np.float64)
+    if "track" in outputs:
+        columns.update(tracking_columns(spec, cell, outputs["track"]))
     for name in TIMING_COLUMNS:
         # one figure per chunk (batched estimators), or one per row (host functions)
         values = np.asarray(outputs.get(name, np.nan), dtype=np.float64)
         columns[name] = np.broadcast_to(values, (count,)).copy()
     return pd.DataFrame(columns)
+
+
+def tracking_summary(table: pd.DataFrame) -> pd.DataFrame:
+    """One row per cell of a sweep of a system that changes: the fraction within the
+    band before the change, the fraction that re-entered and that settled (± binomial
+    SE), the re-entry samples of those that re-entered (median; mean ± SE), and the
+    steady RMSE after re-entry over all parameters and of the changed one (mean ± SE)."""
+    rows = []
+    for cell, group in table.groupby(CELL_COLUMNS, sort=False):
+        reentry = group["reentry"].to_numpy(float)
+        entered = np.isfinite(reentry)
+        row = dict(zip(CELL_COLUMNS, cell, strict=True), count=len(group))
+        for label, hits in (
+            ("before_change", group["before_change"].to_numpy(bool)),
+            ("reentered", entered),
+            ("settled", group["settled"].to_numpy(bool)),
+        ):
+            row[f"{label}_rate"], row[f"{label}_rate_se"] = _rate(hits)
+        row["reentry_median"] = float(np.median(reentry[entered])) if entered.any() else np.nan
+        row["reentry_mean"], row["reentry_mean_se"] = _mean_se(reentry[entered])
+        for name in ("steady_rmse", "steady_rmse_changed"):
+            row[name], row[f"{name}_se"] = _mean_se(group[name].to_numpy(float)[entered])
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def true_trajectory(spec) -> pd.DataFrame:
+    """The true parameters of a sweep of a system that changes at the samples where the
+    estimate is recorded (`_engine.tracking_samples`), one row per N and sample."""
+    from .._changing import trajectory
+    from ._engine import tracking_samples
+
+    every = dict(spec.estimator_settings("recursive"))["every"]
+    frames = []
+    for n in spec.n:
+        samples = tracking_samples(n, every)
+        values = np.asarray(trajectory(spec.truth(), spec.change, n))[samples - 1]
+        frame = pd.DataFrame(values, columns=list(spec.orders.names))
+        frame.insert(0, "sample", samples)
+        frame.insert(0, "n", n)
+        frames.append(frame)
+    return pd.concat(frames, ignore_index=True)
+
+
+def _mean_se(values: np.ndarray) -> tuple[float, float]:
+    if values.size == 0:
+        return float("nan"), float("nan")
+    se = float(np.std(values, ddof=1) / np.sqrt(values.size)) if values.size > 1 else np.nan
+    return float(np.mean(values)), se
+
+
+def track_column(name: str) -> str:
+    return f"track_{name}"
+
+
+def tracking_columns(spec, cell, track) -> dict:
+    """The tracking columns of a system that changes (`Spec.change`): the measures of
+    `_tracking` per realisation, and `track_<name>`, the error trajectory of each
+    parameter at the recorded samples (`_engine.tracking_samples`), as lists."""
+    from ._engine import tracking_samples
+    from ._tracking import BAND, _measures
+
+    names = spec.orders.names
+    track = np.asarray(track, dtype=np.float64)
+    samples = tracking_samples(cell.n, dict(spec.estimator_settings(cell.estimator))["every"])
+    column = names.index(spec.change.parameter)
+    reentry, settled, steady, changed, before = _measures(
+        track, samples, spec.change.at, BAND, column
+    )
+    columns = {
+        "reentry": reentry,
+        "settled": settled,
+        "steady_rmse": steady,
+        "steady_rmse_changed": changed,
+        "before_change": before,
+    }
+    for j, name in enumerate(names):
+        columns[track_column(name)] = list(track[:, :, j])
+    return columns
 
 
 # `Solution.path` codes (`_estimator._solution`) as names; 3: unknown

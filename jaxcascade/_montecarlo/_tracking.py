@@ -32,6 +32,9 @@ from .._estimator._recursive import recursive
 from .._model import CascadeParams
 from .._simulate import uniform_input
 
+# re-entry: every parameter back within this distance of the new truth
+BAND = 0.05
+
 
 class Tracking(NamedTuple):
     """Result of `tracking` (NumPy arrays; R realisations, K recorded samples, P
@@ -63,7 +66,7 @@ def tracking(
     realisations: int,
     seed: int = 0,
     every: int = 10,
-    band: float = 0.05,
+    band: float = BAND,
     amplitude: float = 2.0,
     **settings,
 ) -> Tracking:

@@ -30,23 +30,26 @@ from jaxtyping import Array, Bool, Float
 ANTI_WINDUP = ("none", "trace", "directional")
 
 
-def forgetting(k, lam, memory0, growth):
+def forgetting(k, lam, memory0, growth, acceleration=0.0):
     """The forgetting factor after `k` updates: `lam_k = min(lam, 1 - 1 / (memory0 +
-    growth k))`.
+    growth k + acceleration k^2))`.
 
     `1 / (1 - lam_k)` is the recursion's memory in samples: it starts at `memory0` and
-    grows by `growth` per sample until it reaches `1 / (1 - lam)` (never, for `lam = 1`:
-    the factor then tends to 1). Early regressors are built from poor estimates, so they
-    must lose weight; a memory that grows in proportion to the samples seen gives sample
-    s at time k the weight `((memory0 + growth s) / (memory0 + growth k))^(1 / growth)`:
-    the start is forgotten like a power of the elapsed fraction of the record, while the
-    weights stay close enough to uniform that the variance is at most
-    `(beta + 1)^2 / (2 beta + 1)` times that of least squares over the whole record
-    (`beta = 1 / growth`: 1.125 at `growth = 2`). A constant factor `lam < 1` instead
-    forgets everything older than its memory: what tracking needs, at a variance of
-    about `(1 - lam) k / 2` times least squares.
+    grows until it reaches `1 / (1 - lam)` (never, for `lam = 1`: the factor then tends
+    to 1). Early regressors are built from poor estimates, so they must lose weight. A
+    memory that grows in proportion to the samples seen (`acceleration = 0`) gives
+    sample s at time k the weight `((memory0 + growth s) / (memory0 + growth k))^(1 /
+    growth)`: the start is forgotten like a power of the elapsed fraction of the record,
+    and so is everything else, at a variance up to `(beta + 1)^2 / (2 beta + 1)` times
+    that of least squares over the record (`beta = 1 / growth`: 2.8 at `growth =
+    0.25`). A memory that grows like `k^2` forgets sample s by about `exp(-(1/s - 1/k) /
+    acceleration)`: the samples before about `1 / acceleration` fade, the later ones tend
+    to equal weights. A constant factor `lam < 1` instead forgets everything older than
+    its memory: what tracking needs, at a variance of about `(1 - lam) k / 2` times least
+    squares.
     """
-    memory = memory0 + growth * jnp.asarray(k, jnp.result_type(float))
+    k = jnp.asarray(k, jnp.result_type(float))
+    memory = memory0 + growth * k + acceleration * k * k
     return jnp.minimum(lam, 1.0 - 1.0 / memory)
 
 
