@@ -236,7 +236,9 @@ def main(argv=None) -> int:
 
     data, out = pathlib.Path(args.data), pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    command = "python benchmarks/brfd.py " + " ".join(sys.argv[1:] if argv is None else argv)
+    # the command that runs the loops (`--collect` only rewrites the tables from them)
+    given = sys.argv[1:] if argv is None else argv
+    command = "python benchmarks/brfd.py " + " ".join(a for a in given if a != "--collect")
     rows, resources, choices = [], [], []
     planned = [r for r in runs(data, args) if not args.only or args.only in r[0]]
     if args.collect:
