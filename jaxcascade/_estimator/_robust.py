@@ -15,8 +15,8 @@ simulation-error landscape is friendlier (METHOD.md). This estimator
    matter where the literal iteration drifts away from the true basin after a few steps
    (Example 2 under noise, most random systems): on the benchmark's records the
    adaptive path accepts 209 of 256 Example 2 fits instead of 89, 133 random-family
-   fits instead of 68. Calibration of the bound, on the literal estimate's fits, 32 records each of both
-   examples (SNR 25) and the random family (SNR 30): the 48 true-basin fits of the
+   fits instead of 68. Calibration of the bound, on the literal estimate's fits, 32
+   records each of both examples (SNR 25) and the random family (SNR 30): the 48 true-basin fits of the
    examples gave at most 3.3; the 16 wrong-basin fits of Example 2, 47 or more; of the
    23 random-family fits not within 0.05 of the truth, 21 gave 24 or more, two 2.3 and
    4.5 (accepted, not recovered);
