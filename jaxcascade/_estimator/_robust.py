@@ -16,10 +16,10 @@ simulation-error landscape is friendlier (METHOD.md). This estimator
    (Example 2 under noise, most random systems): on the benchmark's records the
    adaptive path accepts 209 of 256 Example 2 fits instead of 89, 133 random-family
    fits instead of 68. Calibration of the bound, on the literal estimate's fits, 32
-   records each of both examples (SNR 25) and the random family (SNR 30): the 48 true-basin fits of the
-   examples gave at most 3.3; the 16 wrong-basin fits of Example 2, 47 or more; of the
-   23 random-family fits not within 0.05 of the truth, 21 gave 24 or more, two 2.3 and
-   4.5 (accepted, not recovered);
+   records each of both examples (SNR 25) and the random family (SNR 30): the 48
+   true-basin fits of the examples gave at most 3.3; the 16 wrong-basin fits of Example
+   2, 47 or more; of the 23 random-family fits not within 0.05 of the truth, 21 gave 24
+   or more, two 2.3 and 4.5 (accepted, not recovered);
 2. otherwise (`PATH_MULTISTART`) it draws `n_starts` initial values from the random-
    system prior in one draw (`_prior.random_systems`, with the breakpoints scaled to the
    record's input range), adds the estimate of step 1 (its cheapest fit) as one more start
@@ -83,7 +83,6 @@ from ._basin import residual_statistic
 from ._literal import initial_guess, voros
 from ._refine import refine, simulation_error
 from ._solution import PATH_ADAPTIVE, PATH_MULTISTART, Solution, finite
-
 
 # Step 1's further starts: these iterates of the literal iteration (history rows; 1 is
 # the paper's first iteration), whose fits must pass the basin test with this fraction
