@@ -5,9 +5,9 @@ The paper's iteration is a fixed-point map without a convergence guarantee; the
 simulation-error landscape is friendlier (METHOD.md). This estimator
 
 1. (adaptive path) runs the literal iteration (`voros`, 30 iterations) and refines its
-   estimate, and its second and third iterates (`_ITERATES`), by Levenberg-Marquardt on
-   the simulation error of the whole record (`adaptive_steps` steps at most; one call
-   site batched over the three starts). A fit passes if it converged, explains the
+   estimate, and its second iterate (`_ITERATES`), by Levenberg-Marquardt on the
+   simulation error of the whole record (`adaptive_steps` steps at most; one call site
+   batched over the two starts). A fit passes if it converged, explains the
    output and its residual looks like measurement noise
    (`_basin.residual_statistic <= threshold`, half of it for the fits from the iterates:
    white and uncorrelated with the input), or the fit is exact to rounding; the
@@ -94,7 +94,7 @@ from ._solution import PATH_ADAPTIVE, PATH_MULTISTART, Solution, finite
 # random family's recovery 243 of 256 instead of 245 (the iterates (1, 2, 3): 243); with
 # half the bound, 3 of the 133 accepted fits are not within 0.05 of the truth (4 of the
 # 68 before) and the family recovers 248.
-_ITERATES = (2, 3)
+_ITERATES = (2,)
 _ITERATE_BOUND = 0.5
 
 
@@ -122,7 +122,7 @@ def robust(
     atol: float = 1e-9,
     adaptive: bool = True,
     threshold: float = 5.0,
-    adaptive_steps: int = 50,
+    adaptive_steps: int = 20,
     fallback_batch: int = 8,
     retries: int = 2,
 ) -> Solution:
