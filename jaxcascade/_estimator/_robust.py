@@ -5,16 +5,17 @@ The paper's iteration is a fixed-point map without a convergence guarantee; the
 simulation-error landscape is friendlier (METHOD.md). This estimator
 
 1. (adaptive path) runs the literal iteration (`voros`, 30 iterations) and refines its
-   estimate, and its second iterate (`_ITERATES`), by Levenberg-Marquardt on the
-   simulation error of the whole record (`adaptive_steps` steps at most; one call site
-   batched over the two starts). A fit passes if it converged, explains the
-   output and its residual looks like measurement noise
-   (`_basin.residual_statistic <= threshold`, half of it for the fits from the iterates:
-   white and uncorrelated with the input), or the fit is exact to rounding; the
-   cheapest that passes is the estimate: `Solution.path == PATH_ADAPTIVE`. The iterates
-   matter where the literal iteration drifts away from the true basin after a few steps
-   (Example 2 under noise, most random systems): on the benchmark's records the
-   adaptive path accepts 209 of 256 Example 2 fits instead of 89, 133 random-family
+   estimate, or its second iterate where the iteration ended unusable (`_ITERATE`), by
+   Levenberg-Marquardt on the simulation error of the whole record (`adaptive_steps`
+   steps at most: under `vmap` every record runs as many steps as the slowest, and the
+   fits that pass need few, at most 21 on Example 1's benchmark records). The fit
+   passes if it converged, explains the output and its residual looks like
+   measurement noise (`_basin.residual_statistic <= threshold`, half of it for a fit
+   from the iterate: white and uncorrelated with the input), or the fit is exact to
+   rounding: then it is the estimate, `Solution.path == PATH_ADAPTIVE`. The iterate
+   matters where the literal iteration drifts away from the true basin after a few
+   steps (Example 2 under noise, most random systems): on the benchmark's records the
+   adaptive path accepts 162 of 256 Example 2 fits instead of 89, 87 random-family
    fits instead of 68. Calibration of the bound, on the literal estimate's fits, 32
    records each of both examples (SNR 25) and the random family (SNR 30): the 48
    true-basin fits of the examples gave at most 3.3; the 16 wrong-basin fits of Example
@@ -22,7 +23,7 @@ simulation-error landscape is friendlier (METHOD.md). This estimator
    or more, two 2.3 and 4.5 (accepted, not recovered);
 2. otherwise (`PATH_MULTISTART`) it draws `n_starts` initial values from the random-
    system prior in one draw (`_prior.random_systems`, with the breakpoints scaled to the
-   record's input range), adds the estimate of step 1 (its cheapest fit) as one more start
+   record's input range), adds the estimate of step 1 as one more start
    (`literal_start`), refines every start on the simulation error of the first `subset`
    samples (`vmap` over starts), keeps the `n_refine` best by simulation error on the
    whole record and refines them on the whole record;
@@ -84,17 +85,18 @@ from ._literal import initial_guess, voros
 from ._refine import refine, simulation_error
 from ._solution import PATH_ADAPTIVE, PATH_MULTISTART, Solution, finite
 
-# Step 1's further starts: these iterates of the literal iteration (history rows; 1 is
-# the paper's first iteration), whose fits must pass the basin test with this fraction
-# of its bound. Measured on the benchmark's 256 records (seed 0) of Example 2 (SNR 25)
-# and of the random family (SNR 30), fits from every start below 50 Levenberg-Marquardt
-# steps: the fit from the literal estimate passed on 89 and 68; adding the second and
-# third iterates, 209 and 133. Iterate fits that pass with the full bound but end in a
-# neighbouring minimum (12-30% above the truth's cost, statistic 2.7-4.9) made the
-# random family's recovery 243 of 256 instead of 245 (the iterates (1, 2, 3): 243); with
-# half the bound, 3 of the 133 accepted fits are not within 0.05 of the truth (4 of the
-# 68 before) and the family recovers 248.
-_ITERATES = (2,)
+# Step 1's start where the literal iteration ends unusable (singular, out of the domain,
+# out of iterations): its second iterate (history row; 1 is the paper's first
+# iteration), whose fit must pass the basin test with this fraction of its bound.
+# Measured on the benchmark's 256 records (seed 0) of Example 2 (SNR 25) and of the
+# random family (SNR 30), where the iteration ends unusable on 203 and 217: the fits
+# from the literal estimate passed on 89 and 68 (at most 50 steps), from this start
+# 162 and 87 (at most 20 steps). The iteration drifts away from the true basin after
+# its first steps. Iterate fits that pass with the full bound but end in a neighbouring
+# minimum (12-30% above the truth's cost, statistic 2.7-4.9) cost the random family 3
+# recovered records; with half the bound 2 of the 87 accepted fits are not within 0.05
+# of the truth (4 of the 68 before).
+_ITERATE = 2
 _ITERATE_BOUND = 0.5
 
 
@@ -250,44 +252,34 @@ def _core(
 
 
 def _adaptive(u, y, orders, *, rtol, atol, steps, bound) -> _Stage:
-    """Step 1: the literal iteration, refined on the whole record from its estimate and
-    from its early iterates (`_ITERATES`), and the basin test."""
+    """Step 1: the literal iteration, refined on the whole record from its estimate, or
+    from an early iterate (`_ITERATE`) where it ended unusable, and the basin test."""
     dtype = u.dtype
     init = initial_guess(orders, jnp.min(u), jnp.max(u), dtype)
     literal = voros(u, y, orders, init, max_iterations=30)
-    vector = literal.params.to_vector()
+    ended = ~_failed(literal.status)
     # the iterates past the iteration's end repeat its estimate (`voros`)
-    candidates = jnp.stack([vector, *(literal.history[k] for k in _ITERATES)])
-    finite_start = jnp.all(jnp.isfinite(candidates), axis=1)
-    starts = jnp.where(finite_start[:, None], candidates, init.to_vector())
-
-    def one(start, bound):
-        fit = refine(
-            CascadeParams.from_vector(start, orders, check=False),
-            u,
-            y,
-            max_steps=steps,
-            rtol=rtol,
-            atol=atol,
-        )
-        # the start is an estimate (the literal one, one of its iterates, or the paper's
-        # initial values): a fit that stays there is not stuck at a random draw
-        status = judge(fit.status, fit.cost, y, start, fit.params.to_vector(), True, rtol)
-        return fit, status, _in_basin(fit.params, status, fit.cost, u, y, bound)
-
-    # one call site of Levenberg-Marquardt, batched over the starts: no extra compile
-    bounds = jnp.array([1.0] + [_ITERATE_BOUND] * len(_ITERATES), dtype) * bound
-    fits, statuses, passed = jax.vmap(one)(starts, bounds)
-    # the cheapest fit that passes the basin test, else the cheapest
-    costs = jnp.where(jnp.isfinite(fits.cost), fits.cost, jnp.inf)
-    chosen = jnp.argmin(jnp.where(passed, costs, jnp.inf))
-    chosen = jnp.where(jnp.any(passed), chosen, jnp.argmin(costs))
-    fit, status, start = _take(fits, chosen), statuses[chosen], starts[chosen]
-    # the multi-start's literal start is an estimate itself when the literal iteration
-    # ended usable, or when it is the converged fit from one of its iterates
-    usable = finite_start[chosen] & jnp.where(
-        chosen == 0, ~_failed(literal.status), ~_failed(status)
+    candidate = jnp.where(ended, literal.params.to_vector(), literal.history[_ITERATE])
+    finite_start = jnp.all(jnp.isfinite(candidate))
+    start = jnp.where(finite_start, candidate, init.to_vector())
+    fit = refine(
+        CascadeParams.from_vector(start, orders, check=False),
+        u,
+        y,
+        max_steps=steps,
+        rtol=rtol,
+        atol=atol,
     )
+    # the start is an estimate (the literal one, one of its iterates, or the paper's
+    # initial values): a fit that stays there is not stuck at a random draw
+    status = judge(fit.status, fit.cost, y, start, fit.params.to_vector(), True, rtol)
+    accepted = _in_basin(
+        fit.params, status, fit.cost, u, y, jnp.where(ended, 1.0, _ITERATE_BOUND) * bound
+    )
+    # the multi-start's literal start (this fit's estimate) is an estimate itself: the
+    # fit started from the literal estimate of an iteration that ended usable, or from
+    # an iterate (not a random draw)
+    usable = finite_start
     estimate = fit.params.to_vector()
     solution = Solution(
         params=fit.params,
@@ -298,7 +290,7 @@ def _adaptive(u, y, orders, *, rtol, atol, steps, bound) -> _Stage:
         cycle_amplitude=jnp.zeros((), dtype),
         path=jnp.asarray(PATH_ADAPTIVE, jnp.int32),
     )
-    return _Stage(finite(solution, start), passed[chosen], estimate, usable)
+    return _Stage(finite(solution, start), accepted, estimate, usable)
 
 
 def _in_basin(params, status, cost, u, y, bound):
