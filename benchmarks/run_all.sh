@@ -69,7 +69,9 @@ recursive() {  # issue 25: the recursive estimator: speed, noise-free, vs batch,
     python benchmarks/recursive_vs_batch.py --seed 1000 --out results/recursive_vs_batch
     python benchmarks/recursive_tracking.py --out results/recursive_tracking
 }
-inputs() {  # issue 24: input designs at equal power (reads the shared damper record)
+inputs() {  # issue 24: input designs at equal power (reads the shared damper record);
+    # the script resumes from its per-cell tables, so old tables go first
+    rm -rf results/input_design
     python benchmarks/input_design.py --realisations 200 --data "${BRFD_DATA:-../shared/data/brfd}" \
         --out results/input_design
 }
@@ -77,6 +79,7 @@ inputs() {  # issue 24: input designs at equal power (reads the shared damper re
 noise() {  # issue 24: pem under AR(1) noise drawn by the script; the noise study
     python benchmarks/pem_coloured.py --realisations 200 --estimators pem,robust \
         --out results/pem_coloured
+    rm -rf results/noise_study   # per-cell tables: the script resumes from them
     python benchmarks/noise_study.py --realisations 200 --out results/noise_study
 }
 
