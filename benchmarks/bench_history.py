@@ -5,10 +5,11 @@
 Reads the JSON summary that `jaxcascade bench --json` wrote and appends commit (this
 checkout's HEAD, `-dirty` when tracked files differ from it), date (UTC), machine (the
 bench's device line: CPU model and cores), fits/s, the ratio to the NumPy/SciPy baseline,
-the floor fraction with its count, compile seconds and the load average as the timed
-runs started. The history is how a figure gets compared with the one before it: a
-drop between two rows at a similar load is a regression to look for with
-`benchmarks/bench_compare.py`.
+the floor fraction with its count, compile seconds, the load average as the timed
+runs started and the host threads the realisations were split over (`workers`; blank
+in rows from before the split, which ran them as one call). The history is how a
+figure gets compared with the one before it: a drop between two rows at a similar load
+is a regression to look for with `benchmarks/bench_compare.py`.
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ FIELDS = (
     "floor_count",
     "compile_s",
     "load",
+    "workers",
 )
 
 
@@ -59,9 +61,19 @@ def main(argv=None) -> int:
         "floor_count": figures.get("floor_count", ""),
         "compile_s": round(figures["compile_s"], 2),
         "load": round(figures["load"], 2) if "load" in figures else "",
+        "workers": figures.get("workers", ""),
     }
     out = pathlib.Path(args.out)
     new = not out.exists()
+    if not new:  # a history written before a column was added: rewritten with it, blank
+        with open(out, newline="") as file:
+            reader = csv.DictReader(file)
+            old_fields, rows = reader.fieldnames or [], list(reader)
+        if tuple(old_fields) != FIELDS:
+            with open(out, "w", newline="") as file:
+                writer = csv.DictWriter(file, fieldnames=FIELDS, restval="")
+                writer.writeheader()
+                writer.writerows({key: r.get(key, "") for key in FIELDS} for r in rows)
     with open(out, "a", newline="") as file:
         writer = csv.DictWriter(file, fieldnames=FIELDS)
         if new:

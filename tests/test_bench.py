@@ -32,6 +32,7 @@ def test_bench_json_is_sane(capsys, tmp_path):
         assert math.isfinite(figures[key]) and figures[key] > 0, key
     assert figures["floor_count"] == _flops.FLOOR_COUNT
     assert figures["load"] >= 0
+    assert figures["workers"] >= 1  # host threads the realisations were split over
     assert figures["ratio"] == pytest.approx(
         figures["fits_per_s"] / figures["baseline_fits_per_s"], rel=1e-12
     )
@@ -137,3 +138,22 @@ def test_bench_history_appends_a_row_per_summary(tmp_path):
     assert rows[0]["machine"] == figures["device"] and float(rows[0]["fits_per_s"]) == 1234.5
     assert rows[0]["floor_count"] == _flops.FLOOR_COUNT and float(rows[0]["load"]) == 1.5
     assert rows[0]["commit"]  # this checkout's HEAD
+
+
+def test_bench_splits_the_realisations_over_the_workers_asked_for(capsys):
+    assert main(["bench", *TINY, *FAST, "--workers", "2", "--json"]) == 0
+    figures = json.loads(capsys.readouterr().out)
+    assert figures["workers"] == 2 and figures["fits_per_s"] > 0
+
+
+@pytest.mark.parametrize(
+    "arguments, says",
+    [
+        (["--workers", "0"], "--workers must be at least 1"),
+        (["--workers", "2", "--estimator", "robust"], "--workers applies to --estimator literal"),
+    ],
+)
+def test_bench_workers_refused_cleanly(capsys, arguments, says):
+    assert main(["bench", *TINY, *FAST, *arguments]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and says in err and "Traceback" not in err

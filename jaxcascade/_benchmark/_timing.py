@@ -7,7 +7,9 @@ literal Vörös iteration (`NO_EARLY_STOP`: negative tolerances, so every realis
 runs them all). Three figures come from one run on the same machine:
 
 - jaxcascade's batched path: `vmap` over PRNG keys of simulation, noise and `voros`,
-  compiled ahead of time (compile time reported separately), best of `repeats` runs;
+  compiled ahead of time (compile time reported separately), the realisations split
+  over the host's cores (`workers` threads, `_batching.host_threads`), best of
+  `repeats` runs;
   by default (`--backend auto`) each iteration's normal equations come from the fused
   CPU kernel (`_fused`), `--backend xla` times the pure-XLA path instead;
 - the NumPy/SciPy baseline (`_baseline`), realisations one after another, on a subset,
@@ -52,6 +54,7 @@ SUMMARY_KEYS = (
     "device",
     "floor_count",
     "load",
+    "workers",
 )
 
 
@@ -135,11 +138,17 @@ def run_jax(
     seed=0,
     backend="auto",
     batch=None,
+    workers=None,
 ):
-    """Compile and time the batched path; returns a dict of figures."""
+    """Compile and time the batched path; returns a dict of figures.
+
+    The realisations are split over `workers` host threads (default: the cores this
+    process may use, `_batching.host_workers`), one compiled program of one part's shape
+    (`_batching.host_threads`); `workers=1` runs them as one call."""
     import jax
     import jax.numpy as jnp
 
+    from .._batching import host_threads, host_workers, split_batch
     from .._normal_equations import resolve
 
     dtype = jnp.result_type(float)
@@ -152,7 +161,9 @@ def run_jax(
     build_s = time.perf_counter() - start
     start = time.perf_counter()
     fit, backend = batched_fit(example_number, n, iterations, dtype, backend=backend, batch=batch)
-    compiled = fit.lower(keys, params).compile()
+    workers = workers or host_workers()
+    pieces, _ = split_batch(keys, workers)
+    compiled = host_threads(fit.lower(pieces[0], params).compile(), len(pieces))
     compile_s = time.perf_counter() - start
     # the machine's load (1-minute average) as the timed runs start: on a shared machine
     # the figures are only comparable at a similar load
@@ -174,6 +185,7 @@ def run_jax(
         "status_counts": dict(zip(*(a.tolist() for a in codes_counts), strict=True)),
         "dtype": str(np.dtype(dtype)),
         "backend": backend,
+        "workers": len(pieces),
     }
 
 
@@ -251,6 +263,7 @@ def run_benchmark(
     seed=0,
     baseline_threads=1,
     backend="auto",
+    workers=None,
 ) -> dict:
     """The full benchmark; returns every figure (the `SUMMARY_KEYS` and the details)."""
     record = {
@@ -263,7 +276,16 @@ def run_benchmark(
         "device": device_description(),
     }
     record.update(
-        run_jax(realisations, n, iterations, example_number, repeats, seed, backend=backend)
+        run_jax(
+            realisations,
+            n,
+            iterations,
+            example_number,
+            repeats,
+            seed,
+            backend=backend,
+            workers=workers,
+        )
     )
     record.update(
         run_baseline_process(

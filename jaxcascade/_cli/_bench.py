@@ -17,7 +17,8 @@ def _report(r: dict) -> str:
             f"workload: Example {r['example']}, N = {r['n']}, SNR {r['snr']:g}, "
             f"{r['iterations']} iterations, {r['realisations']} realisations ({r['dtype']})",
             f"device: {r['device']}",
-            f"jaxcascade ({r['backend']} normal equations): {r['fits_per_s']:.1f} fits/s "
+            f"jaxcascade ({r['backend']} normal equations, {r['workers']} host thread(s)): "
+            f"{r['fits_per_s']:.1f} fits/s "
             f"({r['run_s']:.3f} s per run; compile {r['compile_s']:.2f} s, kernel build "
             f"{r['kernel_build_s']:.2f} s; statuses {r['status_counts']})",
             f"numpy baseline: {r['baseline_fits_per_s']:.2f} fits/s "
@@ -156,6 +157,8 @@ def run_bench(args) -> int:
         lookup(args.estimator)  # a user's estimator: registered or an entry point
     except ValueError as error:
         raise CLIError(f"--estimator: {error}") from None
+    if args.workers is not None and args.estimator != "literal":
+        raise CLIError("--workers applies to --estimator literal; leave it out for the others.")
     if args.estimator not in ("literal", "recursive"):
         return run_robust_bench(args)
     if args.estimator == "recursive":
@@ -178,6 +181,7 @@ def run_bench(args) -> int:
         "--matmul-size": (args.matmul_size, 1),
         "--repeats": (args.repeats, 1),
         "--baseline-threads": (args.baseline_threads, 1),
+        "--workers": (args.workers if args.workers is not None else 1, 1),
     }
     for flag, (value, low) in checks.items():
         if value < low:
@@ -196,6 +200,7 @@ def run_bench(args) -> int:
         args.seed,
         args.baseline_threads,
         args.backend,
+        args.workers,
     )
     if out is not None:
         _write_csv(record, out)
@@ -297,6 +302,14 @@ def add_parser(subparsers) -> None:
         choices=("auto", "xla", "fused"),
         help="how the normal equations are formed (default auto: the fused CPU kernel "
         "where it applies)",
+    )
+    parser.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        metavar="W",
+        help="literal: host threads the realisations are split over, one part each "
+        "(default: the cores this process may use; 1: one call)",
     )
     parser.add_argument("--json", action="store_true", help="print the summary as JSON")
     parser.add_argument("--out", default=None, help="also write every figure to this CSV file")

@@ -11,7 +11,8 @@ with `jax.ffi`; nothing is downloaded. Where no compiler is found or the build f
   `$XDG_CACHE_HOME/jaxcascade` or `~/.cache/jaxcascade`).
 - `CXX`: the compiler (default `c++`, then `g++`).
 - `JAXCASCADE_FUSED=off`: never build or use the kernel.
-- `JAXCASCADE_THREADS`: threads per call (default: the machine's hardware threads).
+- `JAXCASCADE_THREADS`: threads per call (default: the machine's hardware threads),
+  divided among the calls running at once (a batch split over host threads).
 """
 
 from __future__ import annotations
