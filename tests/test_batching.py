@@ -35,16 +35,22 @@ def test_host_threads_equal_one_call_bit_for_bit(size, workers):
         np.testing.assert_array_equal(np.asarray(got), np.asarray(want))
 
 
-def test_literal_workload_over_host_threads_equals_one_call():
+@pytest.mark.parametrize("records, exact", [(8, True), (10, False)])
+def test_literal_workload_over_host_threads_equals_one_call(records, exact):
     # the bench's workload with the fused kernel (where built): two kernel calls at once
-    # share the cores (`active_calls` in normal_equations.cc) and compute the same sums
+    # share the cores (`active_calls` in normal_equations.cc) and compute the same sums.
+    # 8 records in micro-batches of 4: the parts' micro-batches are the whole's (2 x 4
+    # against 1 x 4 each), bit for bit; 10 records: 3 x 4 against 2 x 3, to rounding.
     from jaxcascade._benchmark._timing import batched_fit
     from jaxcascade._examples import example
 
     params = example(1).params(jnp.float64)
-    keys = jax.random.split(jax.random.PRNGKey(3), 10)
+    keys = jax.random.split(jax.random.PRNGKey(3), records)
     fit, _ = batched_fit(1, 300, 4, jnp.float64, batch=4)
     whole = fit(keys, params)
     split = host_threads(fit, 2)(keys, params)
     for got, want in zip(split, whole, strict=True):
-        np.testing.assert_array_equal(np.asarray(got), np.asarray(want))
+        if exact:
+            np.testing.assert_array_equal(np.asarray(got), np.asarray(want))
+        else:
+            np.testing.assert_allclose(np.asarray(got), np.asarray(want), rtol=1e-9, atol=1e-12)
