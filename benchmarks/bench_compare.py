@@ -14,8 +14,9 @@ jaxcascade bench --json` plus the BENCH ARGUMENTS (default: the bench's own work
 each in a fresh process, alternating which goes first (A B, B A, ...) so that a drift
 in the machine's load touches both alike.
 
-Prints each run's fits/s, compile seconds and load average, then the ratio of this
-checkout's fits/s to the reference's, pair by pair: min / median / max. On a machine
+Prints each run's fits/s (sample updates/s with `-- --estimator recursive`), compile
+seconds and load average, then the ratio of this checkout's rate to the reference's,
+pair by pair: min / median / max. On a machine
 shared with other work, quote the median with its spread, never one run. `--json`
 prints the same as JSON. Exit code 0 unless a bench failed (2).
 """
@@ -51,6 +52,9 @@ def run_bench(folder: pathlib.Path, pythonpath: str | None, arguments: list[str]
         raise RuntimeError(f"the bench in {folder} failed: {done.stderr.strip()[-1000:]}")
     record = json.loads(done.stdout.strip().splitlines()[-1])
     record.setdefault("load", os.getloadavg()[0])  # a reference without the field
+    # the throughput compared: fits/s, or sample updates/s (`--estimator recursive`)
+    unit = "fits_per_s" if "fits_per_s" in record else "updates_per_s"
+    record["rate"], record["unit"] = record[unit], unit.replace("_per_s", "/s")
     return record
 
 
@@ -110,11 +114,10 @@ def main(argv=None) -> int:
                 if not args.json:
                     this, ref = figures["this"], figures["reference"]
                     print(
-                        f"round {round_ + 1}: this {this['fits_per_s']:.0f} fits/s (compile "
+                        f"round {round_ + 1}: this {this['rate']:.4g} {this['unit']} (compile "
                         f"{this['compile_s']:.1f} s, load {this['load']:.2f}), reference "
-                        f"{ref['fits_per_s']:.0f} fits/s (compile {ref['compile_s']:.1f} s, "
-                        f"load {ref['load']:.2f}), ratio "
-                        f"{this['fits_per_s'] / ref['fits_per_s']:.3f}",
+                        f"{ref['rate']:.4g} {ref['unit']} (compile {ref['compile_s']:.1f} s, "
+                        f"load {ref['load']:.2f}), ratio {this['rate'] / ref['rate']:.3f}",
                         flush=True,
                     )
         except RuntimeError as error:
@@ -127,7 +130,8 @@ def main(argv=None) -> int:
                     cwd=ROOT,
                     capture_output=True,
                 )
-    ratios = [p["this"]["fits_per_s"] / p["reference"]["fits_per_s"] for p in pairs]
+    ratios = [p["this"]["rate"] / p["reference"]["rate"] for p in pairs]
+    unit = pairs[0]["this"]["unit"]
     summary = {
         "this": describe(ROOT),
         "reference": label,
@@ -136,8 +140,9 @@ def main(argv=None) -> int:
         "ratio_min": min(ratios),
         "ratio_median": statistics.median(ratios),
         "ratio_max": max(ratios),
-        "this_fits_per_s": [p["this"]["fits_per_s"] for p in pairs],
-        "reference_fits_per_s": [p["reference"]["fits_per_s"] for p in pairs],
+        "unit": unit,
+        "this_rate": [p["this"]["rate"] for p in pairs],
+        "reference_rate": [p["reference"]["rate"] for p in pairs],
         "load": [p["this"]["load"] for p in pairs] + [p["reference"]["load"] for p in pairs],
         "device": pairs[0]["this"]["device"],
     }
@@ -145,7 +150,7 @@ def main(argv=None) -> int:
         print(json.dumps(summary, indent=2))
     else:
         print(
-            f"this ({summary['this']}) / reference ({label}): ratio of fits/s "
+            f"this ({summary['this']}) / reference ({label}): ratio of {unit} "
             f"{summary['ratio_median']:.3f} (median of {args.runs} pairs; min "
             f"{summary['ratio_min']:.3f}, max {summary['ratio_max']:.3f}); "
             f"{summary['device']}; load {min(summary['load']):.1f}-{max(summary['load']):.1f}"
