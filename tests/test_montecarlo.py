@@ -81,6 +81,33 @@ def test_table_independent_of_chunk_size_and_order():
     assert np.all(np.isfinite(a["nrmse"]) | (a["nrmse"] == np.inf))
 
 
+def test_chunks_in_threads_give_the_same_table_and_lose_nothing_on_a_failure(tmp_path, monkeypatch):
+    # `workers` chunks at once in host threads: every chunk keeps its shape, so the table
+    # equals the one-at-a-time run exactly (the bound included)
+    one = without_timing(run(small_spec(snr=[25.0, 50.0]), progress=False))
+    two = without_timing(run(small_spec(snr=[25.0, 50.0], workers=2), progress=False))
+    pd.testing.assert_frame_equal(two, one, check_exact=True)
+
+    # a chunk that fails stops the run after the chunks beside it finished and were
+    # written; the resumed run (one worker: not part of the identity) completes the table
+    from jaxcascade._montecarlo import _run
+
+    def failing(spec, cell, indices):
+        if cell.snr == 50.0 and 3 in indices:
+            raise RuntimeError("a chunk failed")
+        return run_chunk(spec, cell, indices)
+
+    out = tmp_path / "threads.parquet"
+    monkeypatch.setattr(_run, "run_chunk", failing)
+    with pytest.raises(RuntimeError, match="a chunk failed"):
+        run(small_spec(snr=[25.0, 50.0], workers=2), out, progress=False)
+    written = list((tmp_path / "threads.parquet.partial").glob("chunk-*.parquet"))
+    assert len(written) >= 4 and not out.exists()  # the SNR 25 cell (3 chunks) at least
+    monkeypatch.undo()
+    table = run(small_spec(snr=[25.0, 50.0]), out, progress=False)
+    pd.testing.assert_frame_equal(without_timing(table), one, check_exact=True)
+
+
 def test_estimators_see_the_same_records():
     # The data key leaves out the estimator (common random numbers), so the key column
     # of a cell is the same whatever the estimator; the seed changes it.
@@ -172,6 +199,7 @@ realisations = 4
 seed = 3
 estimators = ["literal"]
 chunk_size = 2
+workers = 2
 [input]
 amplitude = 2.0
 [estimator.literal]
@@ -180,7 +208,9 @@ max_iterations = 20
     path = tmp_path / "spec.toml"
     path.write_text(text)
     spec = Spec.load(path)
-    assert spec.n == (300, 600) and spec.snr == (10.0, np.inf)
+    assert spec.n == (300, 600) and spec.snr == (10.0, np.inf) and spec.workers == 2
+    # how the sweep runs is not what it computes: a resumed run may change it
+    assert "workers" not in spec.to_dict(chunk_size=False)
     assert spec.settings == {"literal": {"max_iterations": 20}}
     assert Spec.from_dict(spec.to_dict()) == spec
     assert [c.n for c in spec.cells()] == [300, 300, 600, 600]
@@ -193,6 +223,7 @@ max_iterations = 20
         (["--snr", "0"], "SNR must be positive"),
         (["--snr", "25,-1"], "SNR must be positive"),
         (["--realisations", "0"], "'realisations' must be an integer >= 1"),
+        (["--workers", "0"], "'workers' must be an integer >= 1"),
         (["--estimator", "nonsense"], "Unknown estimator 'nonsense'"),
         (["--example", "3"], "Unknown example 3"),
     ],

@@ -53,6 +53,7 @@ def spec_from_args(args):
         ("seed", args.seed),
         ("estimators", args.estimator),
         ("chunk_size", args.chunk_size),
+        ("workers", args.workers),
         ("scheduler", args.scheduler),
     ):
         if value is not None:
@@ -291,6 +292,14 @@ def add_parser(subparsers) -> None:
         "(default white; scaled to the SNR as added): " + kind_help(NOISES),
     )
     parser.add_argument("--chunk-size", type=int, help="realisations per compiled batch")
+    parser.add_argument(
+        "--workers",
+        type=int,
+        metavar="W",
+        help="chunks run at once in this process, one host thread each (default 1): "
+        "more throughput on several cores, the same rows, W chunks' memory; the "
+        "timing columns then include the chunks' contention",
+    )
     parser.add_argument(
         "--scheduler",
         metavar="tcp://HOST:PORT",

@@ -60,6 +60,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import json
+import threading
 import time
 
 import equinox as eqx
@@ -375,6 +376,9 @@ def _function(spec: Spec, cell: Cell, batched: bool):
 # apart from computing. Keyed by everything the executable depends on.
 _EXECUTABLES: dict = {}
 _MAX_EXECUTABLES = 64
+# Chunks running at once in threads (`Spec.workers`) compile a cell's program once: the
+# second waits for the first's and finds it cached.
+_COMPILING = threading.Lock()
 
 
 def _executable(spec: Spec, cell: Cell, arguments) -> tuple:
@@ -393,14 +397,15 @@ def _executable(spec: Spec, cell: Cell, arguments) -> tuple:
         str(key.dtype),
         key.shape,
     )
-    if cache_key in _EXECUTABLES:
-        return _EXECUTABLES[cache_key], 0.0
-    start = time.perf_counter()
-    compiled = _function(spec, cell, batched=True).lower(*arguments).compile()
-    seconds = time.perf_counter() - start
-    if len(_EXECUTABLES) >= _MAX_EXECUTABLES:
-        _EXECUTABLES.pop(next(iter(_EXECUTABLES)))
-    _EXECUTABLES[cache_key] = compiled
+    with _COMPILING:
+        if cache_key in _EXECUTABLES:
+            return _EXECUTABLES[cache_key], 0.0
+        start = time.perf_counter()
+        compiled = _function(spec, cell, batched=True).lower(*arguments).compile()
+        seconds = time.perf_counter() - start
+        if len(_EXECUTABLES) >= _MAX_EXECUTABLES:
+            _EXECUTABLES.pop(next(iter(_EXECUTABLES)))
+        _EXECUTABLES[cache_key] = compiled
     return compiled, seconds
 
 

@@ -18,7 +18,8 @@ import jax.numpy as jnp
 import numpy as np
 import pandas as pd
 
-from ._engine import run_chunk
+from .._estimator import is_host
+from ._engine import _fit, run_chunk
 from ._spec import Spec
 from ._tables import read_metadata, run_metadata, write_table
 
@@ -192,18 +193,54 @@ def _backends(folder: pathlib.Path) -> str:
 
 
 def _results(spec: Spec, chunks: list, dtype):
-    """`(cell, indices, frame)` for every chunk, in this process or on the Dask cluster."""
-    if spec.scheduler is None:
-        return ((cell, indices, run_chunk(spec, cell, indices)) for cell, indices in chunks)
-    from ._distributed import distributed_chunks  # imports dask only when asked for
+    """`(cell, indices, frame)` for every chunk, in this process (`spec.workers` at once)
+    or on the Dask cluster."""
+    if spec.scheduler is not None:
+        from ._distributed import distributed_chunks  # imports dask only when asked for
 
-    return distributed_chunks(spec, chunks, dtype)
+        return distributed_chunks(spec, chunks, dtype)
+    if spec.workers > 1 and not any(is_host(_fit(spec, cell)) for cell in spec.cells()):
+        return _in_threads(spec, chunks, spec.workers)
+    return ((cell, indices, run_chunk(spec, cell, indices)) for cell, indices in chunks)
+
+
+def _in_threads(spec: Spec, chunks: list, workers: int):
+    """`(cell, indices, frame)` as chunks finish, `workers` of them running at once, each
+    in its own host thread (JAX releases the GIL while a compiled program runs). A
+    chunk's rows do not depend on what runs beside it; a chunk that fails stops the run
+    once the chunks already running have finished (those are yielded, so written)."""
+    from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
+
+    pending = iter(chunks)
+    with ThreadPoolExecutor(workers, thread_name_prefix="jaxcascade-chunk") as pool:
+        running = {}
+
+        def submit():
+            for cell, indices in pending:
+                running[pool.submit(run_chunk, spec, cell, indices)] = (cell, indices)
+                return
+
+        for _ in range(workers):
+            submit()
+        failed = None
+        while running:
+            finished, _ = wait(running, return_when=FIRST_COMPLETED)
+            for future in finished:
+                cell, indices = running.pop(future)
+                if future.exception() is not None:
+                    failed = failed or future.exception()
+                    continue
+                yield cell, indices, future.result()
+                if failed is None:
+                    submit()
+        if failed is not None:
+            raise failed
 
 
 def _without_chunk(spec_dict):
     if not isinstance(spec_dict, dict):
         return spec_dict
-    return {k: v for k, v in spec_dict.items() if k not in ("chunk_size", "scheduler")}
+    return {k: v for k, v in spec_dict.items() if k not in ("chunk_size", "workers", "scheduler")}
 
 
 def _disable(progress):
