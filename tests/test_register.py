@@ -191,6 +191,21 @@ def test_cli_sweep_and_fit_run_a_registered_host_function(registry, tmp_path, ca
     assert f"MR1 = {np.mean(y): .6f}" in capsys.readouterr().out
 
 
+def test_reproduce_runs_a_registered_estimator_and_refuses_an_unknown_one(
+    registry, tmp_path, capsys
+):
+    # `reproduce --estimator` takes what the registry knows, a user's estimator included
+    jc.register_estimator("mean_host", mean_host)
+    argv = ["reproduce", "--example", "1", "--snr", "inf", "--out", str(tmp_path), "--json"]
+    assert main([*argv, "--estimator", "mean_host"]) == 0
+    summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert summary["status"] == "converged" and set(summary["estimates"]) >= {"MR1", "cR"}
+    assert list(tmp_path.glob("*mean_host_estimates.csv"))
+    assert main([*argv, "--estimator", "nowhere"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "Unknown estimator 'nowhere'" in err
+
+
 def jc_key(seed):
     import jax
 
