@@ -1,7 +1,8 @@
-"""Issue 7: sweep throughput in-process versus on a local Dask cluster of 1 and 2 workers.
+"""Issue 7: sweep throughput in-process versus on a local Dask cluster of 1 and 2 workers,
+and in-process with chunks in host threads (`Spec.workers`, `jaxcascade sweep --workers`).
 
     python benchmarks/distributed_throughput.py [--realisations 2048] [--n 2000]
-        [--chunk-size 64] [--workers 1,2] [--out results/distributed_throughput.csv]
+        [--chunk-size 64] [--workers 1,2] [--threads 2] [--out results/distributed_throughput.csv]
 
 Fixed workload: the literal iteration on Example 1 at SNR 25 (`jaxcascade sweep`'s
 engine, `_montecarlo.run`, without writing files), float64. Each mode is first warmed
@@ -11,7 +12,8 @@ the rows back and assembling the table included. The Dask cluster is a `LocalClu
 of worker processes with one thread each on loopback; XLA uses every core of the
 machine in each process, so on a small machine workers compete for the same cores.
 
-Columns: mode (`in-process` or `dask`), workers, realisations, n, chunk_size, seconds,
+Columns: mode (`in-process`, `in-process threads`: `--threads` chunks at once, or
+`dask`), workers (Dask workers, or the threads), realisations, n, chunk_size, seconds,
 realisations_per_s, speedup (over in-process), warmup_s, cpu_count, device.
 """
 
@@ -39,7 +41,7 @@ def _spec(realisations: int, n: int, chunk_size: int):
     )
 
 
-def in_process(spec) -> dict:
+def in_process(spec, threads: int = 1) -> dict:
     from jaxcascade._montecarlo._engine import run_chunk
     from jaxcascade._montecarlo._run import run
 
@@ -47,9 +49,12 @@ def in_process(spec) -> dict:
     run_chunk(spec, spec.cells()[0], [0])
     warmup = time.perf_counter() - start
     start = time.perf_counter()
-    table = run(spec, progress=False)
+    table = run(dataclasses.replace(spec, workers=threads), progress=False)
     seconds = time.perf_counter() - start
     assert len(table) == spec.realisations
+    if threads > 1:
+        return {"mode": "in-process threads", "workers": threads, "seconds": seconds,
+                "warmup_s": warmup}  # fmt: skip
     return {"mode": "in-process", "workers": 0, "seconds": seconds, "warmup_s": warmup}
 
 
@@ -93,6 +98,9 @@ def main(argv=None) -> int:
     parser.add_argument("--n", type=int, default=2000)
     parser.add_argument("--chunk-size", type=int, default=64)
     parser.add_argument("--workers", default="1,2", help="comma-separated worker counts")
+    parser.add_argument(
+        "--threads", type=int, default=2, help="in-process chunks at once (1: no such row)"
+    )
     parser.add_argument("--out", default="results/distributed_throughput.csv")
     args = parser.parse_args(argv)
 
@@ -106,6 +114,8 @@ def main(argv=None) -> int:
 
     spec = _spec(args.realisations, args.n, args.chunk_size)
     rows = [in_process(spec)]
+    if args.threads > 1:
+        rows.append(in_process(spec, args.threads))
     for workers in [int(w) for w in args.workers.split(",") if w.strip()]:
         rows.append(on_cluster(spec, workers))
     table = pd.DataFrame(rows)
