@@ -170,7 +170,8 @@ def test_throughput_runner_on_a_tiny_workload(tmp_path):
     argv = ["--realisations", "6", "--n", str(N), "--chunk-size", "3", "--workers", "1"]
     assert runner.main([*argv, "--out", str(out)]) == 0
     table = pd.read_csv(out)
-    assert list(table["mode"]) == ["in-process", "dask"] and list(table["workers"]) == [0, 1]
+    assert list(table["mode"]) == ["in-process", "in-process threads", "dask"]
+    assert list(table["workers"]) == [0, 2, 1]  # two chunks at once in-process; a worker
     assert (table["realisations_per_s"] > 0).all() and table["speedup"].iloc[0] == 1.0
 
 
