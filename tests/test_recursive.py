@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from jaxcascade._benchmark import _recursive_baseline
-from jaxcascade._changing import Change, simulate_changing, trajectory
+from jaxcascade._changing import Change, simulate_changing, trajectory, trajectory_traced
 from jaxcascade._cli import main
 from jaxcascade._estimator import ESTIMATORS, _recursive, estimator
 from jaxcascade._estimator._recursive import Recursive, recursive
@@ -253,6 +253,39 @@ def test_bad_changes_are_refused_with_a_sentence():
     assert Change.from_table({"parameter": "cR", "at": 2000, "to": 0.45}).to == 0.45
 
 
+def test_several_parameters_change_at_once():
+    # a worn drive train widens both gaps: the table is one-parameter changes side by side
+    ex = example(1)
+    names, column = ex.orders.names, ex.orders.names.index("cL")
+    change = Change(["cL", "cR"], 600, to=[0.3, 0.45])
+    assert change.parameter == ("cL", "cR") and change.parameters == ("cL", "cR")
+    assert change.describe() == "cL to 0.3, cR to 0.45 at sample 600"
+    both = np.asarray(trajectory(ex.params(), change, 1000))
+    one = np.asarray(trajectory(ex.params(), Change("cR", 600, to=0.45), 1000))
+    np.testing.assert_array_equal(np.delete(both, column, 1), np.delete(one, column, 1))
+    assert both[599, column] == 0.2 and both[600, column] == 0.3
+    # the engine's traced table is the checked one
+    traced = trajectory_traced(ex.params().to_vector(), change, 1000, ex.orders)
+    np.testing.assert_array_equal(np.asarray(traced), both)
+    drift = np.asarray(trajectory(ex.params(), Change(["b1", "a2"], 100, drift=[1e-4, -1e-4]), 300))
+    np.testing.assert_allclose(np.diff(drift[100:, names.index("b1")]), 1e-4, rtol=1e-9)
+    np.testing.assert_allclose(np.diff(drift[100:, names.index("a2")]), -1e-4, rtol=1e-9)
+    for bad, match in (
+        ({"parameter": ["cL", "cR"], "to": 0.3}, "as many"),
+        ({"parameter": ["cL", "cR"], "to": [0.3]}, "as many"),
+        ({"parameter": "cR", "to": [0.4]}, "as many"),
+        ({"parameter": ["cR", "cR"], "to": [0.4, 0.5]}, "twice"),
+        ({"parameter": [], "to": []}, "list of names"),
+        ({"parameter": ["cL", "cR"], "to": [0.3, float("nan")]}, "finite"),
+    ):
+        with pytest.raises(ValueError, match=match):
+            Change(at=10, **bad)
+    with pytest.raises(ValueError, match="unknown parameter 'gap'"):
+        trajectory(ex.params(), Change(["cR", "gap"], 10, to=[0.4, 0.1]), 100)
+    with pytest.raises(ValueError, match="change of cR, mR: .*mR"):
+        trajectory(ex.params(), Change(["cR", "mR"], 10, to=[0.4, -1.0]), 100)
+
+
 def test_tracking_measures():
     # one realisation re-enters at the second recorded sample after the change and stays;
     # one re-enters and leaves again; one never re-enters
@@ -390,6 +423,42 @@ def test_a_change_gives_other_records_and_the_tracking_columns(tmp_path, monkeyp
     summary = tracking_summary(resumed)
     assert summary["count"].tolist() == [4]
     assert summary["reentered_rate"][0] == np.mean(np.isfinite(resumed["reentry"]))
+
+
+def test_a_spec_changes_several_parameters_and_keeps_the_one_parameter_keys():
+    from jaxcascade._montecarlo import _run
+    from jaxcascade._montecarlo._engine import _change_identity, cell_key
+    from jaxcascade._montecarlo._spec import Spec
+
+    # a one-parameter change keeps the identity it had before lists were allowed, so
+    # its earlier sweeps resume
+    assert _change_identity(Change("cR", 400, to=0.45)) == {
+        "parameter": "cR",
+        "at": 400,
+        "to": (0.45).hex(),
+    }
+    table = {"parameter": ["cL", "cR"], "at": 400, "to": [0.3, 0.45]}
+    spec = Spec.from_dict({**CHANGE_SPEC, "realisations": 2, "system": {"change": table}})
+    assert spec.change == Change(("cL", "cR"), 400, to=(0.3, 0.45))
+    assert spec.to_dict()["system"]["change"] == table  # TOML lists again
+    assert Spec.from_dict(spec.to_dict()) == spec
+    one = Spec.from_dict({**CHANGE_SPEC, "realisations": 2})
+    cell = spec.cells()[0]
+    assert not np.array_equal(cell_key(spec, cell), cell_key(one, cell))
+
+    out = _run.run(spec, progress=False)
+    assert np.all(out["true_cL"] == 0.3) and np.all(out["true_cR"] == 0.45)
+    np.testing.assert_allclose(
+        np.stack(out["track_cL"].to_list())[:, -1], out["cL"] - 0.3, rtol=0, atol=1e-12
+    )
+    # the changed parameters' steady RMSE is over both of them from the re-entry on
+    from jaxcascade._montecarlo._engine import tracking_samples
+
+    samples = tracking_samples(700, 10)
+    for r in np.flatnonzero(np.isfinite(out["reentry"])):
+        k = np.flatnonzero(samples - 400 == out["reentry"][r])[0]
+        errors = np.stack([out["track_cL"][r][k:], out["track_cR"][r][k:]])
+        assert out["steady_rmse_changed"][r] == pytest.approx(np.sqrt(np.mean(errors**2)))
 
 
 def test_sweep_command_with_a_change_writes_the_tracking_summary_and_plot(tmp_path, capsys):

@@ -125,11 +125,14 @@ def _exact(value):
 
 
 def _change_identity(change: Change) -> dict:
-    out = {"parameter": change.parameter, "at": int(change.at)}
+    """A one-parameter change keeps the key it had before several could change."""
+    several = isinstance(change.parameter, tuple)
+    out = {"parameter": list(change.parameter) if several else change.parameter}
+    out["at"] = int(change.at)
     for name in ("to", "drift"):
         value = getattr(change, name)
         if value is not None:
-            out[name] = float(value).hex()
+            out[name] = [float(v).hex() for v in value] if several else float(value).hex()
     return out
 
 

@@ -440,7 +440,7 @@ class Spec:
             out["system"] = {"orders": str(self.orders), "params": dict(self.params)}
         if self.change is not None:
             table = {k: v for k, v in dataclasses.asdict(self.change).items() if v is not None}
-            out.setdefault("system", {})["change"] = table
+            out.setdefault("system", {})["change"] = _listed(table)
         out["input"] = {"kind": self.input, **_listed(self.input_settings)}
         out["noise"] = {"kind": self.noise, **_listed(self.noise_settings)}
         out["n"] = list(self.n)

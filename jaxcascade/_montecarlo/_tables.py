@@ -206,9 +206,9 @@ def tracking_columns(spec, cell, track) -> dict:
     names = spec.orders.names
     track = np.asarray(track, dtype=np.float64)
     samples = tracking_samples(cell.n, dict(spec.estimator_settings(cell.estimator))["every"])
-    column = names.index(spec.change.parameter)
+    columns = [names.index(name) for name in spec.change.parameters]
     reentry, settled, steady, changed, before = _measures(
-        track, samples, spec.change.at, BAND, column
+        track, samples, spec.change.at, BAND, columns
     )
     columns = {
         "reentry": reentry,

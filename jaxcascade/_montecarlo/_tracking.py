@@ -1,7 +1,7 @@
 """Monte-Carlo tracking study of the recursive estimator on a system that changes.
 
-Per realisation: a uniform input, the cascade simulated with a parameter that steps or
-drifts (`_changing`), output noise at the SNR (of the whole noise-free record, as
+Per realisation: a uniform input, the cascade simulated with parameters that step or
+drift (`_changing`), output noise at the SNR (of the whole noise-free record, as
 `_simulate.add_noise`), and one on-line pass of `recursive` keeping its estimate every
 `every` samples. From the error trajectory `estimate - truth(t)`:
 
@@ -11,7 +11,7 @@ drifts (`_changing`), output noise at the SNR (of the whole noise-free record, a
   end of the record (a tracker that re-enters and wanders off again is not settled);
 - `steady_rmse`: the root mean square error over the parameters and the recorded
   samples from the re-entry to the end (NaN without re-entry), and the same for the
-  changed parameter alone (`steady_rmse_changed`);
+  changed parameters alone (`steady_rmse_changed`);
 - `before`: whether every parameter was within the band just before the change (a
   realisation that had not converged then says nothing about tracking).
 
@@ -76,7 +76,7 @@ def tracking(
     o = truth.orders
     dtype = truth.to_vector().dtype
     truths = trajectory(truth, change, n)
-    column = o.names.index(change.parameter)
+    columns = [o.names.index(name) for name in change.parameters]
     bounds = (-amplitude, amplitude)
 
     def one(key):
@@ -93,11 +93,12 @@ def tracking(
     samples = np.minimum(np.arange(1, count + 1) * every, n)
     errors = np.asarray(rows) - np.asarray(truths)[samples - 1][None]
     return Tracking(
-        samples, errors, *_measures(errors, samples, change.at, band, column), np.asarray(status)
+        samples, errors, *_measures(errors, samples, change.at, band, columns), np.asarray(status)
     )
 
 
-def _measures(errors, samples, at, band, column):
+def _measures(errors, samples, at, band, columns):
+    """Per realisation (module docstring); `columns`: the changed parameters' indices."""
     inside = np.all(np.abs(errors) <= band, axis=2)  # (R, K)
     after = samples > at
     R = errors.shape[0]
@@ -112,7 +113,7 @@ def _measures(errors, samples, at, band, column):
             reentry[r] = samples[k] - at
             settled[r] = bool(np.all(inside[r, k:]))
             steady[r] = np.sqrt(np.mean(errors[r, k:] ** 2))
-            steady_changed[r] = np.sqrt(np.mean(errors[r, k:, column] ** 2))
+            steady_changed[r] = np.sqrt(np.mean(errors[r, k:][:, columns] ** 2))
     last_before = np.flatnonzero(samples <= at)
     before = inside[:, last_before[-1]] if last_before.size else np.zeros(R, bool)
     return reentry, settled, steady, steady_changed, before

@@ -59,10 +59,9 @@ def tracking_figures(spec, table: pd.DataFrame, folder, stem: str) -> list[pathl
     change = spec.change
     for (system, n, snr, estimator), group in table.groupby(CELL_COLUMNS, sort=False):
         path = folder / f"{stem}_tracking_n{n}_snr{snr:g}.png"
-        what = f"to {change.to}" if change.to is not None else f"drift {change.drift:g}/sample"
         title = (
-            f"{system}, {estimator}, N {n}, SNR {snr:g}: {change.parameter} {what} at sample "
-            f"{change.at}; {len(group)} realisations"
+            f"{system}, {estimator}, N {n}, SNR {snr:g}: {change.describe()}; "
+            f"{len(group)} realisations"
         )
         plot_tracking(group, tracking_samples(int(n), every), change.at, BAND, path, title)
         paths.append(path)
