@@ -102,8 +102,9 @@ def fisher_information(
     """Fisher information `J_w^T J_w / sigma_w^2` of theta for the record(s) `u`; a batch
     of records (leading axis) gives their average information. The noise level is
     `sigma`, or `std(simulate(params, u)) / snr` (the paper's amplitude SNR), the
-    standard deviation of the noise as added; `poles` and `zeros` (real, inside the unit
-    circle) make it coloured (module docstring); none: white."""
+    standard deviation of the noise as added; `poles` and `zeros` (real numbers or
+    `[radius, angle]` pairs, `_noise_filter.roots`; poles inside the unit circle) make it
+    coloured (module docstring); none: white."""
     options = dict(snr=snr, sigma=sigma, poles=poles, zeros=zeros)
     if u.ndim == 2:
         return jnp.mean(jax.vmap(lambda one: fisher_information(params, one, **options))(u), 0)
@@ -141,9 +142,13 @@ def noise_bound_options(noise=None) -> dict:
     **noise_bound_options(noise))`."""
     if noise is None:
         return {}
+
+    def plain(value):  # a real root, or a [radius, angle] pair (`_noise_filter.roots`)
+        return tuple(float(v) for v in value) if isinstance(value, tuple | list) else float(value)
+
     return {
-        "poles": tuple(float(p) for p in getattr(noise, "poles", ())),
-        "zeros": tuple(float(z) for z in getattr(noise, "zeros", ())),
+        "poles": tuple(plain(p) for p in getattr(noise, "poles", ())),
+        "zeros": tuple(plain(z) for z in getattr(noise, "zeros", ())),
     }
 
 

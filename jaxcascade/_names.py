@@ -47,8 +47,8 @@ INPUTS = {
 # output noise kinds of a sweep: name: one-line summary (`Disturbance.summary`)
 NOISES = {
     "white": "white Gaussian noise (the paper's)",
-    "ar": "stationary AR noise (real poles)",
-    "arma": "stationary ARMA noise (real poles and zeros)",
+    "ar": "stationary AR noise (poles real or [radius, angle] pairs)",
+    "arma": "stationary ARMA noise (poles and zeros real or [radius, angle] pairs)",
     "student_t": "white Student-t noise (dof > 2 degrees of freedom)",
     "outliers": "Gaussian noise plus outliers (fraction, size in stds)",
 }

@@ -9,8 +9,10 @@ q^-1 + ...` (zeros); AR noise has no `d` (the convention of `_noise.ARNoise`). I
 one-step-ahead predictor's error is `w = A(q)/C(q) e` (`whiten`, from rest: `e(t) = w(t)
 = 0` for `t <= 0`), what a prediction-error estimator minimises and what the Cramér-Rao
 bound of coloured noise whitens the output's Jacobian with (`_efficiency.crlb`).
-Everything here is traceable except `coefficients` (host side: poles and zeros are
-settings).
+Everything here is traceable except `roots` and `coefficients` (host side: poles and
+zeros are settings). A pole or zero is a real number, or a pair `[radius, angle]`: the
+complex conjugate pair `radius exp(+-i angle)` (`angle` in radians per sample, in
+`(0, pi)`), a resonance of the noise's spectrum at `angle` (or, for zeros, a notch).
 """
 
 from __future__ import annotations
@@ -26,27 +28,56 @@ from ._model import reflection_coefficients
 CRITERIA = ("aic", "bic", "none")
 
 
+def _real(value) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+def roots(values, kind: str = "root") -> np.ndarray:
+    """Poles or zeros (module docstring: real numbers and `[radius, angle]` pairs) as
+    complex numbers, each pair as its two conjugates. A `ValueError` naming `kind`
+    for anything else, a negative radius or an angle outside `(0, pi)` (a real root
+    is a number)."""
+    out = []
+    for value in values:
+        if _real(value):
+            out.append(complex(value))
+            continue
+        if not (isinstance(value, tuple | list) and len(value) == 2 and all(map(_real, value))):
+            raise ValueError(
+                f"A noise {kind} must be a real number or a pair [radius, angle], got {value!r}."
+            )
+        radius, angle = (float(v) for v in value)
+        if not (radius >= 0 and 0 < angle < np.pi):
+            raise ValueError(
+                f"A noise {kind} pair [radius, angle] needs radius >= 0 and 0 < angle < pi "
+                f"(radians per sample), got {list(value)}."
+            )
+        out += [radius * np.exp(1j * angle), radius * np.exp(-1j * angle)]
+    return np.asarray(out, complex)
+
+
+def polynomial(values: np.ndarray) -> np.ndarray:
+    """`prod (1 - r q^-1)` over complex `values` closed under conjugation: the real
+    coefficients after the leading 1."""
+    return np.real(np.poly(values))[1:].astype(float) if len(values) else np.zeros(0)
+
+
 def coefficients(poles=(), zeros=()) -> tuple[np.ndarray, np.ndarray]:
-    """`(c, d)` of the noise with real `poles` (inside the unit circle) and `zeros`:
-    `A(q) = prod (1 - p q^-1)`, `c = -A[1:]`; `C(q) = prod (1 - z q^-1)`, `d = C[1:]`. A
-    zero outside the unit circle is replaced by its reciprocal: the same spectrum up to
-    a gain (which `variance_ratio` absorbs), and the predictor's (minimum-phase) form.
-    A `ValueError` for a pole on or outside the unit circle (not stationary) or a zero
-    on it (no stable predictor)."""
-    for kind, roots in (("pole", poles), ("zero", zeros)):
-        for root in roots:
-            if not (isinstance(root, int | float) and not isinstance(root, bool)):
-                raise ValueError(f"A noise {kind} must be a real number, got {root!r}.")
+    """`(c, d)` of the noise with `poles` (inside the unit circle) and `zeros`, real or
+    in pairs (`roots`): `A(q) = prod (1 - p q^-1)`, `c = -A[1:]`; `C(q) = prod (1 - z
+    q^-1)`, `d = C[1:]`. A zero outside the unit circle is replaced by the reciprocal of
+    its conjugate: the same spectrum up to a gain (which `variance_ratio` absorbs), and
+    the predictor's (minimum-phase) form. A `ValueError` for a pole on or outside the
+    unit circle (not stationary) or a zero on it (no stable predictor)."""
+    poles, zeros = roots(poles, "pole"), roots(zeros, "zero")
     for pole in poles:
         if not abs(pole) < 1:
-            raise ValueError(f"A noise pole must lie inside the unit circle, got {pole}.")
+            raise ValueError(f"A noise pole must lie inside the unit circle, got {pole:g}.")
     for zero in zeros:
         if abs(zero) == 1:
-            raise ValueError(f"A noise zero on the unit circle has no stable predictor: {zero}.")
-    zeros = tuple(z if abs(z) < 1 else 1 / z for z in zeros)
-    A = np.poly(np.asarray(poles, float)) if len(poles) else np.ones(1)
-    C = np.poly(np.asarray(zeros, float)) if len(zeros) else np.ones(1)
-    return -np.asarray(A[1:], float), np.asarray(C[1:], float)
+            raise ValueError(f"A noise zero on the unit circle has no stable predictor: {zero:g}.")
+    zeros = np.asarray([z if abs(z) < 1 else 1 / np.conj(z) for z in zeros], complex)
+    return -polynomial(poles), polynomial(zeros)
 
 
 def _shift(signal, lag: int):

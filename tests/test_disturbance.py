@@ -26,6 +26,8 @@ def draws(noise, n=N, records=RECORDS, seed=0):
         ("ar", {"poles": [0.97, -0.5]}),
         ("arma", {"poles": [0.9], "zeros": [0.5]}),
         ("arma", {"poles": [], "zeros": [0.5, -0.3]}),
+        ("ar", {"poles": [[0.95, 0.6]]}),
+        ("arma", {"poles": [0.5, [0.9, 1.2]], "zeros": [[0.8, 2.0]]}),
         ("student_t", {"dof": 5}),
         ("outliers", {"fraction": 0.02, "size": 10}),
     ],
@@ -67,6 +69,29 @@ def test_arma_is_the_recursion_of_a_numpy_loop():
     np.testing.assert_allclose(e, expected, rtol=1e-12, atol=1e-12)  # float64, same sums
 
 
+def test_a_pole_pair_is_a_resonance():
+    # [radius, angle]: the conjugate poles r exp(+-i w), A(q) = 1 - 2 r cos(w) q^-1 + r^2 q^-2
+    radius, angle = 0.9, 0.8
+    noise = disturbance("ar", poles=[[radius, angle]])
+    a, c = noise.coefficients()
+    np.testing.assert_allclose(a, [-2 * radius * np.cos(angle), radius**2], rtol=1e-14)
+    assert c.size == 0
+    # an AR(2)'s lag-1 autocorrelation is -a1 / (1 + a2)
+    e = draws(noise, records=500)
+    rho = np.mean(e[:, 1:] * e[:, :-1])
+    assert abs(rho - 2 * radius * np.cos(angle) / (1 + radius**2)) < 0.03
+    # its spectrum peaks near the angle: |1 / A(e^{iw})| is largest there
+    grid = np.linspace(0.01, np.pi - 0.01, 2000)
+    response = 1 / np.abs(1 + a[0] * np.exp(-1j * grid) + a[1] * np.exp(-2j * grid))
+    assert abs(grid[np.argmax(response)] - angle) < 0.05
+    # as settings: nested lists, and back to the same noise
+    assert noise.settings() == {"poles": [[radius, angle]]}
+    assert disturbance("ar", **noise.settings()) == noise
+    # a real pole and a pair together: the product of their polynomials
+    both = disturbance("arma", poles=[0.5, [radius, angle]], zeros=[-0.3]).coefficients()[0]
+    np.testing.assert_allclose(np.r_[1, both], np.convolve([1, -0.5], np.r_[1, a]), rtol=1e-14)
+
+
 def test_autocovariance_of_an_ar1():
     gamma = autocovariance(np.array([-0.9]), 4)
     np.testing.assert_allclose(gamma, 0.9 ** np.arange(4) / (1 - 0.81), rtol=1e-12)
@@ -101,6 +126,11 @@ def test_add_noise_keeps_the_snr_of_the_noise_as_added_and_white_is_the_default(
         ("ar", {"pole": 0.9}, "Unknown setting 'pole'"),
         ("ar", {"zeros": [0.1]}, "Unknown setting 'zeros'"),
         ("ar", {"poles": [1.2]}, "every pole must lie in (-1, 1)"),
+        ("ar", {"poles": [[1.0, 0.6]]}, "a pole pair's radius must lie in [0, 1)"),
+        ("ar", {"poles": [[0.9, 0.0]]}, "0 < angle < pi"),
+        ("arma", {"zeros": [[0.9, 3.2]]}, "0 < angle < pi"),
+        ("ar", {"poles": [[0.9]]}, "a real number or a pair [radius, angle]"),
+        ("ar", {"poles": [[0.9, 0.5]] * 5}, "at most 8 are supported (a pair counts two)"),
         ("student_t", {"dof": 2}, "dof must lie in (2, "),
         ("outliers", {"fraction": 1.5}, "fraction must lie in [0, 1]"),
     ],

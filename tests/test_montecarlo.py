@@ -18,7 +18,12 @@ import pandas as pd
 import pytest
 
 from jaxcascade._cli import main
-from jaxcascade._montecarlo._engine import chunk_memory, run_chunk, run_realisation
+from jaxcascade._montecarlo._engine import (
+    cell_identity,
+    chunk_memory,
+    run_chunk,
+    run_realisation,
+)
 from jaxcascade._montecarlo._run import run, summary_path
 from jaxcascade._montecarlo._spec import Cell, Spec
 from jaxcascade._montecarlo._tables import compare, read_metadata, summarise, without_timing
@@ -503,3 +508,27 @@ def test_noise_and_input_enter_the_cell_keys_and_the_papers_keys_stay():
         )
     }
     assert len(identities) == 6
+
+
+def test_a_resonant_noise_runs_with_its_own_bound(tmp_path, capsys):
+    # a [radius, angle] pole pair from the command line: a cell of its own, its
+    # provenance as written, and the Cramér-Rao bound of that noise (not of white noise)
+    argv = ["sweep", "--example", "1", "--n", "300", "--realisations", "2", "--seed", "0"]
+    out = tmp_path / "resonant.parquet"
+    assert main([*argv, "--noise", "ar:poles = [[0.95, 0.6]]", "--out", str(out)]) == 0
+    assert "noise: ar (poles = [[0.95, 0.6]])" in capsys.readouterr().out
+    assert read_metadata(out)["spec"]["noise"] == {"kind": "ar", "poles": [[0.95, 0.6]]}
+    spec = Spec.from_dict(read_metadata(out)["spec"])
+    assert Spec.from_dict(spec.to_dict()) == spec
+    assert spec.disturbance().coefficients()[0].shape == (2,)
+    summary = pd.read_csv(tmp_path / "resonant.summary.csv")
+    assert np.all(np.isfinite(summary["crlb_std"])) and np.all(summary["crlb_std"] > 0)
+    # against white noise of the same SNR: other keys, and a bound several times lower
+    # (the resonant noise's innovations have 1/16.8 of its variance: most of it is
+    # predictable from its past, which the whitened Jacobian's information uses)
+    resonant = small_spec(noise="ar", noise_settings={"poles": [[0.95, 0.6]]})
+    white = small_spec()
+    cell = white.cells()[0]
+    assert cell_identity(resonant, cell) != cell_identity(white, cell)
+    one, other = run_realisation(resonant, cell, 0), run_realisation(white, cell, 0)
+    assert np.all(np.isfinite(one["crlb"])) and np.all(one["crlb"] < 0.5 * other["crlb"])

@@ -17,6 +17,7 @@ from jaxcascade._noise_filter import (
     ar_to_unconstrained,
     coefficients,
     fit_ar,
+    roots,
     variance_ratio,
     whiten,
 )
@@ -52,6 +53,13 @@ def test_whiten_and_variance_ratio_agree_with_scipy():
         coefficients((1.0,))
     # a zero outside the unit circle: its reciprocal, the same spectrum's predictor
     np.testing.assert_allclose(coefficients((), (2.0,))[1], coefficients((), (0.5,))[1])
+    # a [radius, angle] pair: the conjugate roots; outside, the reciprocal radius
+    pair = np.array([0.9 * np.exp(0.7j), 0.9 * np.exp(-0.7j)])
+    c, d = coefficients(((0.9, 0.7),), ((2.0, 1.1),))
+    np.testing.assert_allclose(c, -np.poly(pair).real[1:], rtol=1e-14)
+    np.testing.assert_allclose(d, coefficients((), ((0.5, 1.1),))[1], rtol=1e-14)
+    with pytest.raises(ValueError, match="inside the unit circle"):
+        coefficients(((1.0, 0.7),))
 
 
 def test_reflection_parameterisation_round_trips():
@@ -75,8 +83,8 @@ def test_coloured_bound_is_the_whitened_jacobians():
     params = EX.params()
     J = np.asarray(jacobian(params, u))
     sigma = 0.01
-    for poles, zeros in (((0.9,), ()), ((0.5, -0.3), (0.4,))):
-        A, C = np.poly(poles), np.poly(zeros) if zeros else [1.0]
+    for poles, zeros in (((0.9,), ()), ((0.5, -0.3), (0.4,)), (((0.95, 0.6),), ((0.5, 2.0),))):
+        A, C = np.poly(roots(poles)).real, np.poly(roots(zeros)).real if zeros else [1.0]
         Jw = scipy.signal.lfilter(A, C, J, axis=0)
         impulse = scipy.signal.lfilter(C, A, np.eye(1, 4096)[0])
         sigma_w = sigma / np.sqrt(np.sum(impulse**2))
@@ -97,6 +105,8 @@ def test_noise_bound_options_read_poles_and_zeros():
 
     arma = types.SimpleNamespace(poles=(0.9,), zeros=[0.3])
     assert noise_bound_options(arma) == {"poles": (0.9,), "zeros": (0.3,)}
+    resonant = types.SimpleNamespace(poles=(0.5, (0.95, 0.6)), zeros=[[2, 1]])
+    assert noise_bound_options(resonant) == {"poles": (0.5, (0.95, 0.6)), "zeros": ((2.0, 1.0),)}
     heavy = types.SimpleNamespace(dof=3.0)  # no filter: the Gaussian bound of its variance
     assert noise_bound_options(heavy) == {"poles": (), "zeros": ()}
     assert noise_bound_options() == {}

@@ -22,8 +22,9 @@ NOISES: dict[str, type[Disturbance]] = {
 
 
 def disturbance(name: str, **settings: Any) -> Disturbance:
-    """The disturbance registered as `name` with `settings` (lists become tuples); a
-    `ValueError` naming what is known when the name or a setting is not."""
+    """The disturbance registered as `name` with `settings` (lists, nested ones too,
+    become tuples); a `ValueError` naming what is known when the name or a setting is
+    not."""
     if name not in NOISES:
         raise ValueError(f"Unknown noise kind {name!r}; known kinds: {', '.join(NOISES)}.")
     cls = NOISES[name]
@@ -36,7 +37,11 @@ def disturbance(name: str, **settings: Any) -> Disturbance:
         raise ValueError(
             f"Unknown setting {unknown[0]!r} for noise {name!r}; known settings: {listed}."
         )
-    plain = {k: tuple(v) if isinstance(v, list) else v for k, v in settings.items()}
+
+    def frozen(value):  # static settings are hashed: lists, also nested ones, as tuples
+        return tuple(frozen(v) for v in value) if isinstance(value, list | tuple) else value
+
+    plain = {k: frozen(v) for k, v in settings.items()}
     return cls(**plain)
 
 

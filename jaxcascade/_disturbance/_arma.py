@@ -1,11 +1,14 @@
-"""Coloured noise: a stationary ARMA process with real poles and zeros, unit variance.
+"""Coloured noise: a stationary ARMA process, unit variance.
 
 `e = C(q) / A(q) w` with `w` white Gaussian, `A(q) = prod_i (1 - p_i q^-1)` (the poles,
-each in (-1, 1)) and `C(q) = prod_k (1 - z_k q^-1)` (the zeros), divided by the
+inside the unit circle) and `C(q) = prod_k (1 - z_k q^-1)` (the zeros), divided by the
 process's stationary standard deviation. The process is stationary from its first
 sample: the `m = max(p, q)` values of the AR part before the record are drawn from
 their stationary distribution (the Toeplitz matrix of the AR autocovariances, from the
 Yule-Walker equations), so no burn-in is needed and a pole near 1 costs nothing extra.
+A pole or zero is a real number or a pair `[radius, angle]`, the conjugate pair `radius
+exp(+-i angle)` (`_noise_filter.roots`): `poles = [[0.95, 0.6]]` is a resonance at 0.6
+rad/sample, the noise of a lightly damped structure.
 """
 
 from __future__ import annotations
@@ -17,18 +20,24 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._noise_filter import polynomial, roots
 from ._base import Disturbance, number, setting
 
 MAX_ORDER = 8
 
 
-def _roots(values, what: str) -> tuple[float, ...]:
+def _roots(values, what: str) -> tuple:
     if isinstance(values, int | float) and not isinstance(values, bool):
         values = (values,)
     if not isinstance(values, tuple | list):
-        raise ValueError(f"{what} must be a list of numbers, got {values!r}.")
-    if len(values) > MAX_ORDER:
-        raise ValueError(f"{what}: at most {MAX_ORDER} are supported, got {len(values)}.")
+        raise ValueError(
+            f"{what} must be a list of numbers or [radius, angle] pairs, got {values!r}."
+        )
+    count = sum(1 if isinstance(v, int | float) else 2 for v in values)
+    if count > MAX_ORDER:
+        raise ValueError(
+            f"{what}: at most {MAX_ORDER} are supported (a pair counts two), got {count}."
+        )
     return tuple(values)
 
 
@@ -52,29 +61,39 @@ def autocovariance(ar: np.ndarray, lags: int) -> np.ndarray:
     return np.asarray(gamma[: max(lags, 1)])
 
 
+def _pair(value, what: str, *, high: float) -> None:
+    """A `[radius, angle]` pair: radius in [0, high), angle in (0, pi) (`roots` checks
+    the shape and the angle)."""
+    roots((value,), "pole or zero")
+    number(value[0], what, low=0, high=high, high_open=True)
+
+
 class ARMA(Disturbance):
-    """Stationary ARMA noise with real `poles` (each in (-1, 1)) and real `zeros`."""
+    """Stationary ARMA noise with `poles` (inside the unit circle) and `zeros`, each a
+    real number or a `[radius, angle]` conjugate pair (module docstring)."""
 
     name: ClassVar[str] = "arma"
-    summary: ClassVar[str] = "stationary ARMA noise (real poles and zeros)"
+    summary: ClassVar[str] = "stationary ARMA noise (poles and zeros real or [radius, angle] pairs)"
 
     poles: tuple[float, ...] = setting((0.9,))
     zeros: tuple[float, ...] = setting(())
 
     def __check_init__(self):
         for pole in _roots(self.poles, f"Noise {self.name}: poles"):
-            number(pole, f"Noise {self.name}: every pole", low=-1, high=1, low_open=True,
-                   high_open=True)  # fmt: skip
+            if isinstance(pole, tuple | list):
+                _pair(pole, f"Noise {self.name}: a pole pair's radius", high=1)
+            else:
+                number(pole, f"Noise {self.name}: every pole", low=-1, high=1, low_open=True,
+                       high_open=True)  # fmt: skip
         for zero in _roots(self.zeros, f"Noise {self.name}: zeros"):
-            number(zero, f"Noise {self.name}: every zero", low=-1e3, high=1e3)
+            if isinstance(zero, tuple | list):
+                _pair(zero, f"Noise {self.name}: a zero pair's radius", high=1e3)
+            else:
+                number(zero, f"Noise {self.name}: every zero", low=-1e3, high=1e3)
 
     def coefficients(self) -> tuple[np.ndarray, np.ndarray]:
         """`(a, c)`: `A(q) = 1 + a_1 q^-1 + ...`, `C(q) = 1 + c_1 q^-1 + ...` (no leading 1)."""
-
-        def polynomial(roots):
-            return np.atleast_1d(np.real(np.poly(np.asarray(roots, float))))[1:].astype(float)
-
-        return polynomial(_roots(self.poles, "poles")), polynomial(_roots(self.zeros, "zeros"))
+        return polynomial(roots(self.poles, "pole")), polynomial(roots(self.zeros, "zero"))
 
     def stationary(self) -> tuple[np.ndarray, np.ndarray, float]:
         """`(gamma, factor, std)`: the AR part's autocovariances at lags `0..m-1`, the
@@ -122,14 +141,15 @@ class ARMA(Disturbance):
 
 
 class AR(ARMA):
-    """Stationary AR noise with real `poles` (each in (-1, 1)); `poles = [0.9]` is AR(1)."""
+    """Stationary AR noise with `poles` (real in (-1, 1), or `[radius, angle]` pairs);
+    `poles = [0.9]` is AR(1), `poles = [[0.95, 0.6]]` an AR(2) resonance."""
 
     name: ClassVar[str] = "ar"
-    summary: ClassVar[str] = "stationary AR noise (real poles)"
+    summary: ClassVar[str] = "stationary AR noise (poles real or [radius, angle] pairs)"
 
     def __check_init__(self):
         if tuple(_roots(self.zeros, "zeros")):
             raise ValueError('Noise ar has poles only; give zeros with kind = "arma".')
 
     def settings(self):
-        return {"poles": list(self.poles)}
+        return {"poles": super().settings()["poles"]}

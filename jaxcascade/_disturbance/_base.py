@@ -33,8 +33,12 @@ class Disturbance(eqx.Module):
 
     def settings(self) -> dict[str, Any]:
         """The settings as plain values (tuples as lists), for tables and provenance."""
+
+        def plain(value):
+            return [plain(v) for v in value] if isinstance(value, tuple) else value
+
         return {
-            f.name: list(v) if isinstance(v := getattr(self, f.name), tuple) else v
+            f.name: plain(getattr(self, f.name))
             for f in dataclasses.fields(self)
             if f.metadata.get("static", False)
         }

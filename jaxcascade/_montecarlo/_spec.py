@@ -29,7 +29,8 @@ TOML layout (every key optional except the system):
 
     [noise]
     kind = "white"                   # white, ar, arma, student_t, outliers
-    # ar: poles = [0.9] | arma: poles, zeros | student_t: dof = 3 |
+    # ar: poles = [0.9] (a resonance: [[radius, angle]]) | arma: poles, zeros |
+    # student_t: dof = 3 |
     # outliers: fraction = 0.02, size = 10 (in the Gaussian part's stds)
 
     [system]                         # instead of `example`
