@@ -189,3 +189,80 @@ def test_multisine_input_and_ar_noise_on_the_cluster_equal_the_in_process_run(cl
     table = without_timing(run(remote, progress=False))
     assert set(table["noise"]) == {"ar"} and set(table["input"]) == {"multisine"}
     pd.testing.assert_frame_equal(table, expected, check_exact=True)
+
+
+SCRIPT = '''
+import dataclasses, logging, sys
+from typing import ClassVar
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import distributed
+import pandas as pd
+
+jax.config.update("jax_enable_x64", True)
+import jaxcascade as jc
+from jaxcascade._montecarlo._run import run
+from jaxcascade._montecarlo._tables import without_timing
+
+
+def mean_host(u, y, orders, *, shift: float = 0.0):
+    """Defined in this script only: the workers get it by value."""
+    vector = np.array(jc.initial_guess(orders, -2.0, 2.0).to_vector())
+    vector[0] = float(np.mean(np.abs(y))) + shift
+    return vector
+
+
+class Moments(jc.Estimator):
+    name: ClassVar[str] = "moments_here"
+    summary: ClassVar[str] = "defined in this script only"
+    scale: float = eqx.field(static=True, default=1.0)
+
+    def __call__(self, u, y, orders, *, key=None, input_range=None):
+        init = jc.initial_guess(orders, jnp.min(u), jnp.max(u), u.dtype)
+        vector = init.to_vector().at[0].set(self.scale * jnp.std(y))
+        params = jc.CascadeParams.from_vector(vector, orders, check=False)
+        return jc.Solution(
+            params=params, history=vector[None], iterations=jnp.ones((), jnp.int32),
+            cost=jnp.mean((jc.simulate(params, u) - y) ** 2), status=jnp.zeros((), jnp.int32),
+            cycle_amplitude=jnp.zeros((), u.dtype), path=jnp.zeros((), jnp.int32),
+        )
+
+
+if __name__ == "__main__":
+    jc.register_estimator("mean_here", mean_host)
+    jc.register_estimator("moments_here", Moments)
+    spec = jc.Spec(example=1, n=(300,), snr=(25.0,), realisations=4, seed=0, chunk_size=2,
+                   estimators=("literal", "mean_here"), settings={"mean_here": {"shift": 0.5}})
+    expected = without_timing(run(spec, progress=False))
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
+                                  host="127.0.0.1", dashboard_address=":0",
+                                  silence_logs=logging.CRITICAL) as cluster:
+        remote = dataclasses.replace(spec, scheduler=cluster.scheduler_address)
+        table = without_timing(run(remote, progress=False))
+        pd.testing.assert_frame_equal(table, expected, check_exact=True)
+        assert set(table["estimator"]) == {"literal", "mean_here"}
+        print("identical", len(table))
+        classed = dataclasses.replace(remote, estimators=("moments_here",), settings={})
+        try:
+            run(classed, progress=False)
+        except ValueError as error:
+            print("refused:", error)
+'''
+
+
+def test_estimators_registered_in_a_script_run_on_the_cluster(tmp_path):
+    # a host function that exists only in the caller's script (`__main__`): the workers
+    # get it with each chunk, and the table equals the in-process one; an Estimator class
+    # of the script is refused in one sentence (equinox classes do not survive pickling
+    # by value)
+    script = tmp_path / "mine.py"
+    script.write_text(SCRIPT)
+    done = subprocess.run(
+        [sys.executable, str(script)], capture_output=True, text=True, timeout=300, cwd=tmp_path
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert "identical 8" in done.stdout
+    assert "refused: Estimator 'moments_here' is an Estimator class defined" in done.stdout

@@ -16,6 +16,15 @@ fingerprint of the worker's jaxcascade source (version and a hash of its `.py` f
 taken when this module is imported), which must match the caller's: a worker started
 from another version, or after the package was edited, would silently mix results.
 
+An estimator registered in the caller's process (`register_estimator`, or an entry
+point installed there only) travels with every chunk and is registered on the worker
+before the chunk runs. A host function defined in a script or notebook goes by value
+(Dask pickles what lives in `__main__` with cloudpickle); a function or `Estimator`
+class defined in a module goes by reference (that module must be importable on the
+workers). An `Estimator` class defined in the script itself is refused before anything
+runs: an equinox class sent by value cannot be instantiated again (its fields are
+frozen on the rebuilt class: equinox 0.13, cloudpickle 3.1).
+
 This module is imported only when a scheduler is given; the package never needs Dask.
 """
 
@@ -58,13 +67,35 @@ def _fingerprint() -> str:
 FINGERPRINT = _fingerprint()
 
 
+def outside_estimators(spec: Spec) -> dict:
+    """The registry's entries for the spec's estimators that are not jaxcascade's own
+    (module docstring; the spec's construction looked every name up already). A
+    `ValueError` for an `Estimator` class defined in `__main__`."""
+    from .._estimator import BUILTIN, ESTIMATORS
+
+    out = {name: ESTIMATORS[name] for name in spec.estimators if name not in BUILTIN}
+    for name, entry in out.items():
+        if isinstance(entry, type) and entry.__module__ == "__main__":
+            raise ValueError(
+                f"Estimator {name!r} is an Estimator class defined in the running script; "
+                "Dask workers cannot rebuild an equinox class sent by value: define it in "
+                "a module the workers can import, or name it in the entry-point group "
+                "jaxcascade.estimators."
+            )
+    return out
+
+
 def chunk_task(
-    spec: Spec, cell: Cell, indices: list[int], dtype: str
+    spec: Spec, cell: Cell, indices: list[int], dtype: str, outside: dict | None = None
 ) -> tuple[str, str, pd.DataFrame]:
-    """Run on a worker: one chunk in `dtype`; returns `(dtype, fingerprint, rows)`."""
+    """Run on a worker: one chunk in `dtype`, with the caller's `outside` estimators
+    registered first; returns `(dtype, fingerprint, rows)`."""
     import jax
     import jax.numpy as jnp
 
+    from .._estimator import ESTIMATORS
+
+    ESTIMATORS.update(outside or {})
     jax.config.update("jax_enable_x64", dtype == "float64")
     frame = run_chunk(spec, cell, indices)
     return str(np.dtype(jnp.result_type(float))), FINGERPRINT, frame
@@ -79,6 +110,7 @@ def distributed_chunks(
     writing, Ctrl-C) closes the client, which cancels the chunks not yet done.
     """
     distributed = _distributed()
+    outside = outside_estimators(spec)
     dtype = str(np.dtype(dtype))
     try:
         client = distributed.Client(
@@ -97,7 +129,9 @@ def distributed_chunks(
                 f"jaxcascade-chunk-n{cell.n}-snr{cell.snr!r}-{cell.estimator}-"
                 f"{indices[0]}-{uuid.uuid4().hex[:8]}"
             )
-            future = client.submit(chunk_task, spec, cell, indices, dtype, key=key, pure=False)
+            future = client.submit(
+                chunk_task, spec, cell, indices, dtype, outside, key=key, pure=False
+            )
             futures[future] = (cell, indices)
         for future in distributed.as_completed(list(futures), loop=client.loop):
             cell, indices = futures.pop(future)
