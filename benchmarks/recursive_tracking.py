@@ -6,7 +6,8 @@
 Example 1, input uniform in (-2, 2), output noise at SNR 25; at sample 4000 one
 parameter steps: `cR` 0.3 -> 0.45 (the backlash's right gap widens, as in a wearing
 drive train) and, separately, `b1` -0.2 -> -0.35 (a step of the same size in the linear
-block; the block stays stable). One on-line pass of `Recursive` per realisation with a
+block; the block stays stable), and both gaps at once, `cL` 0.2 -> 0.3 with `cR` 0.3 ->
+0.45 (the backlash widens on both sides; `[system.change]` with lists). One on-line pass of `Recursive` per realisation with a
 constant forgetting factor after its start: `lam_k = min(lam, 1 - 1/(10 + 0.1 k + 3e-4 k^2))`
 (`_online.forgetting`), lam in {0.99, 0.995, 0.999}, the estimate kept every `--every`
 samples (`_montecarlo._tracking`). Per change x lam: the fraction within 0.05 of the
@@ -14,7 +15,7 @@ truth just before the change, the fraction that re-enters (every parameter back 
 0.05 of the new truth), the re-entry time (samples after the change; mean and median
 over those that re-enter, mean with its Monte-Carlo SE), the fraction that stays inside
 from the re-entry on, and the steady-state RMSE after the re-entry (over all parameters,
-and of the changed one), mean ± SE. Writes OUT.csv, OUT.md and OUT.png (median of the
+and of the changed ones), mean ± SE. Writes OUT.csv, OUT.md and OUT.png (median of the
 largest absolute error over the parameters, with 10-90% and 25-75% bands, per change
 and lam).
 """
@@ -27,7 +28,14 @@ import time
 
 import numpy as np
 
-CHANGES = (("cR", 0.45), ("b1", -0.35))
+CHANGES = (("cR", 0.45), ("b1", -0.35), (("cL", "cR"), (0.3, 0.45)))
+
+
+def _label(parameter, to) -> tuple[str, str]:
+    """`(parameters, values)` as table cells: `cL+cR`, `0.3/0.45`."""
+    if isinstance(parameter, tuple):
+        return "+".join(parameter), "/".join(f"{v:g}" for v in to)
+    return parameter, f"{to:g}"
 AT = 4000
 
 
@@ -57,6 +65,7 @@ def main(argv=None) -> int:
     R = args.realisations
     for parameter, to in CHANGES:
         change = Change(parameter, AT, to=to)
+        parameter, to = _label(parameter, to)
         for lam in lams:
             start = time.perf_counter()
             result = tracking(
@@ -133,7 +142,8 @@ def plot(curves, lams, path, args) -> None:
         sharex=True,
         sharey=True,
     )
-    for i, (parameter, _) in enumerate(CHANGES):
+    for i, (parameter, to) in enumerate(CHANGES):
+        parameter, _ = _label(parameter, to)
         for j, lam in enumerate(lams):
             ax = axes[i, j]
             samples, q = curves[parameter, lam]
@@ -168,7 +178,8 @@ def markdown(frame, args) -> str:
         f"Command: `python benchmarks/recursive_tracking.py --realisations {args.realisations} "
         f"--n {args.n} --snr {args.snr:g} --lams {args.lams} --every {args.every} "
         f"--seed {args.seed} --out {args.out}`. A step at sample {AT} in one parameter "
-        "(cR 0.3 -> 0.45; b1 -0.2 -> -0.35). Re-entry: samples after the step until every "
+        "(cR 0.3 -> 0.45; b1 -0.2 -> -0.35) or in both gaps (cL 0.2 -> 0.3 with cR 0.3 -> "
+        "0.45). Re-entry: samples after the step until every "
         "parameter is first back within 0.05 of the new truth (estimates recorded every "
         f"{args.every} samples); settled: stays inside from then on; steady RMSE: over the "
         "recorded samples after the re-entry. Means ± Monte-Carlo SE over the realisations "
@@ -180,7 +191,7 @@ def markdown(frame, args) -> str:
     ]
     for row in frame.itertuples():
         lines.append(
-            f"| {row.parameter} -> {row.to:g} | {row.lam:g} ({row.memory:.0f}) | "
+            f"| {row.parameter} -> {row.to} | {row.lam:g} ({row.memory:.0f}) | "
             f"{row.within_before:.2f} | {row.reentered:.2f} ± {row.reentered_se:.2f} | "
             f"{row.reentry_mean:.0f} ± {row.reentry_se:.0f} | {row.reentry_median:.0f} | "
             f"{row.settled:.2f} | {row.steady_rmse:.4f} ± {row.steady_rmse_se:.4f} | "
