@@ -4,8 +4,9 @@
         [--report-only]
 
 Example 1 (N 4000) and Example 2 (N 2000), SNR 25 (`sqrt(var y / var e)` of the noise as
-added); noise white, AR(1) with pole 0.5, 0.9 and 0.97, Student-t with 3 degrees of
-freedom, and 2 % outliers of 10 standard deviations (the sweep's noise kinds, `[noise]`
+added); noise white, AR(1) with pole 0.5, 0.9 and 0.97, a resonance (AR(2) with the
+conjugate poles 0.95 exp(+-0.6 i): `poles = [[0.95, 0.6]]`), Student-t with 3 degrees
+of freedom, and 2 % outliers of 10 standard deviations (the sweep's noise kinds, `[noise]`
 of a spec); estimators literal, robust and pem, which fit the same records in every cell
 (common random numbers). One sweep per system and noise (`OUT/exampleE_NOISE.parquet`,
 resumable). Writes `OUT.csv` (per system, noise, estimator and parameter: bias, std,
@@ -39,6 +40,7 @@ NOISES = {
     "ar0.5": ("ar", {"poles": [0.5]}),
     "ar0.9": ("ar", {"poles": [0.9]}),
     "ar0.97": ("ar", {"poles": [0.97]}),
+    "resonance": ("ar", {"poles": [[0.95, 0.6]]}),
     "student_t3": ("student_t", {"dof": 3.0}),
     "outliers": ("outliers", {"fraction": 0.02, "size": 10.0}),
 }
