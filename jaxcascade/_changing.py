@@ -106,15 +106,9 @@ class Change:
         ]
         return f"{', '.join(parts)} at sample {self.at}"
 
-    def values(self, start: float, n: int) -> np.ndarray:
-        """A one-parameter change's values at samples 0..n-1, from `start`."""
-        (name, to, drift), *rest = self.steps()
-        if rest:
-            raise ValueError("change.values: a change of several parameters; use trajectory.")
-        return _values(start, n, self.at, to, drift)
-
 
 def _values(start: float, n: int, at: int, to, drift) -> np.ndarray:
+    """One parameter's values at samples 0..n-1, from `start`: a step or a drift at `at`."""
     t = np.arange(n)
     if to is not None:
         return np.where(t >= at, float(to), float(start))
