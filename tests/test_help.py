@@ -46,6 +46,31 @@ def test_help_imports_no_jax_numpy_or_pandas(probe):
         assert "examples:\n  jaxcascade " in text, argv
 
 
+VERSION_PROBE = """
+import contextlib, io, json, sys
+from jaxcascade._cli import main
+out = io.StringIO()
+with contextlib.redirect_stdout(out):
+    try:
+        main(["--version"])
+        status = None
+    except SystemExit as error:
+        status = error.code
+heavy = sorted({m.split(".")[0] for m in sys.modules} & set(%r))
+print(json.dumps({"out": out.getvalue(), "status": status, "heavy": heavy}))
+"""
+
+
+def test_version_answers_at_once_with_the_installed_version():
+    import importlib.metadata
+
+    code = VERSION_PROBE % (HEAVY,)
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    result = json.loads(done.stdout)
+    assert result["out"] == f"jaxcascade {importlib.metadata.version('jaxcascade')}\n"
+    assert result["status"] == 0 and result["heavy"] == []
+
+
 def subparsers():
     parser = build_parser()
     (action,) = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]

@@ -13,6 +13,7 @@ import sys
 
 # Each command module imports JAX, NumPy and pandas inside the function that runs it, so
 # `--help` answers at once (tests/test_help.py holds that no help imports JAX).
+from .._version import __version__
 from . import _bench, _fit, _loop, _reproduce, _sweep
 from ._common import CLIError, Parser, examples
 
@@ -35,6 +36,12 @@ def build_parser() -> Parser:
             "--report runs/loop",
             "jaxcascade bench --estimator robust --system example1 --json",
         ),
+    )
+    parser.add_argument(
+        "--version",
+        action="version",
+        version=f"jaxcascade {__version__}",
+        help="print the installed version and exit",
     )
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
     subparsers.required = True
