@@ -31,7 +31,14 @@ TRUTH = jc.example(1).params
 # effect among rivals instead (`test_loop_names_the_undeclared_effect_among_rivals`),
 # and `benchmarks/effects_loop.py` runs every record over the whole library
 # (`results/effects_loop.md`).
-LONG = ("output_offset", "input_delay", "dynamics_order", "output_saturation", "output_feedthrough")
+LONG = (
+    "output_offset",
+    "input_delay",
+    "dynamics_order",
+    "output_saturation",
+    "output_feedthrough",
+    "pwl_segment",
+)
 # Rivals of every record: an output offset explains part of any residual with a mean,
 # an extra pole part of any with dynamics, and the noise model any coloured one.
 RIVALS = ("output_offset", "dynamics_order", "colored_noise")
