@@ -376,9 +376,10 @@ def test_a_change_in_a_spec_parses_and_round_trips():
 
 def test_a_change_gives_other_records_and_the_tracking_columns(tmp_path, monkeypatch):
     from jaxcascade._montecarlo import _run
-    from jaxcascade._montecarlo._engine import cell_key, tracking_samples
+    from jaxcascade._montecarlo._engine import cell_key
     from jaxcascade._montecarlo._spec import Spec
     from jaxcascade._montecarlo._tables import tracking_summary, without_timing
+    from jaxcascade._montecarlo._tracking import tracking_samples
 
     spec = Spec.from_dict(CHANGE_SPEC)
     plain = Spec.from_dict({k: v for k, v in CHANGE_SPEC.items() if k != "system"})
@@ -452,7 +453,7 @@ def test_a_spec_changes_several_parameters_and_keeps_the_one_parameter_keys():
         np.stack(out["track_cL"].to_list())[:, -1], out["cL"] - 0.3, rtol=0, atol=1e-12
     )
     # the changed parameters' steady RMSE is over both of them from the re-entry on
-    from jaxcascade._montecarlo._engine import tracking_samples
+    from jaxcascade._montecarlo._tracking import tracking_samples
 
     samples = tracking_samples(700, 10)
     for r in np.flatnonzero(np.isfinite(out["reentry"])):

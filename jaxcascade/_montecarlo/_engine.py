@@ -80,6 +80,7 @@ from .._prior import random_system
 from .._simulate import add_noise, simulate
 from ._spec import Cell, Spec
 from ._tables import realisation_frame
+from ._tracking import tracking_samples
 
 
 def _hash_words(text: str) -> np.ndarray:
@@ -134,12 +135,6 @@ def _change_identity(change: Change) -> dict:
         if value is not None:
             out[name] = [float(v).hex() for v in value] if several else float(value).hex()
     return out
-
-
-def tracking_samples(n: int, every: int) -> np.ndarray:
-    """The samples (1-based counts) after which `recursive` with `every` records its
-    estimate on a record of `n` samples (the last row: the final estimate)."""
-    return np.minimum(np.arange(1, -(-n // every) + 1) * every, n)
 
 
 def cell_key(spec: Spec, cell: Cell):

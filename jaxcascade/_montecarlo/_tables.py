@@ -169,9 +169,9 @@ def tracking_summary(table: pd.DataFrame) -> pd.DataFrame:
 
 def true_trajectory(spec) -> pd.DataFrame:
     """The true parameters of a sweep of a system that changes at the samples where the
-    estimate is recorded (`_engine.tracking_samples`), one row per N and sample."""
+    estimate is recorded (`_tracking.tracking_samples`), one row per N and sample."""
     from .._changing import trajectory
-    from ._engine import tracking_samples
+    from ._tracking import tracking_samples
 
     every = dict(spec.estimator_settings("recursive"))["every"]
     frames = []
@@ -199,9 +199,8 @@ def track_column(name: str) -> str:
 def tracking_columns(spec, cell, track) -> dict:
     """The tracking columns of a system that changes (`Spec.change`): the measures of
     `_tracking` per realisation, and `track_<name>`, the error trajectory of each
-    parameter at the recorded samples (`_engine.tracking_samples`), as lists."""
-    from ._engine import tracking_samples
-    from ._tracking import BAND, _measures
+    parameter at the recorded samples (`_tracking.tracking_samples`), as lists."""
+    from ._tracking import BAND, _measures, tracking_samples
 
     names = spec.orders.names
     track = np.asarray(track, dtype=np.float64)

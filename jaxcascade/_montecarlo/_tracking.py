@@ -36,6 +36,12 @@ from .._simulate import uniform_input
 BAND = 0.05
 
 
+def tracking_samples(n: int, every: int) -> np.ndarray:
+    """The samples (1-based counts) after which `recursive` with `every` records its
+    estimate on a record of `n` samples (the last row: the final estimate)."""
+    return np.minimum(np.arange(1, -(-n // every) + 1) * every, n)
+
+
 class Tracking(NamedTuple):
     """Result of `tracking` (NumPy arrays; R realisations, K recorded samples, P
     parameters in `Orders.names` order).
@@ -89,8 +95,7 @@ def tracking(
 
     keys = jax.random.split(jax.random.PRNGKey(seed), realisations)
     rows, status = jax.jit(jax.vmap(one))(keys)
-    count = rows.shape[1]
-    samples = np.minimum(np.arange(1, count + 1) * every, n)
+    samples = tracking_samples(n, every)
     errors = np.asarray(rows) - np.asarray(truths)[samples - 1][None]
     return Tracking(
         samples, errors, *_measures(errors, samples, change.at, band, columns), np.asarray(status)

@@ -16,7 +16,7 @@ from .._montecarlo._tables import CELL_COLUMNS, parameter_names, track_column
 
 def plot_tracking(table: pd.DataFrame, samples, at: int, band: float, path, title: str = ""):
     """One cell's figure: a panel per parameter. `samples`: the recorded samples
-    (`_engine.tracking_samples`); `at`: the sample of the change. Saves to `path` and
+    (`_tracking.tracking_samples`); `at`: the sample of the change. Saves to `path` and
     returns the figure."""
     from matplotlib.figure import Figure
 
@@ -49,8 +49,7 @@ def plot_tracking(table: pd.DataFrame, samples, at: int, band: float, path, titl
 
 def tracking_figures(spec, table: pd.DataFrame, folder, stem: str) -> list[pathlib.Path]:
     """`STEM_tracking_n{N}_snr{SNR}.png` per cell of `table` into `folder`."""
-    from .._montecarlo._engine import tracking_samples
-    from .._montecarlo._tracking import BAND
+    from .._montecarlo._tracking import BAND, tracking_samples
 
     folder = pathlib.Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
