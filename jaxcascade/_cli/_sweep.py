@@ -124,13 +124,12 @@ def _print_cells(summary) -> None:
 
 
 def _experiment_line(spec, summary) -> str:
-    """The input design and noise in one line, with the records' rms and crest factor."""
+    """The input design and noise in one line, with the records' rms and crest factor
+    (settings as the TOML lists they were, not the tuples they are frozen as)."""
+    from .._montecarlo._spec import _listed
 
-    def plain(value):  # settings are frozen as tuples; shown as the TOML lists they were
-        return [plain(v) for v in value] if isinstance(value, tuple) else value
-
-    settings = ", ".join(f"{k} = {plain(v)}" for k, v in spec.input_settings.items())
-    noise = ", ".join(f"{k} = {plain(v)}" for k, v in spec.noise_settings.items())
+    settings = ", ".join(f"{k} = {v}" for k, v in _listed(spec.input_settings).items())
+    noise = ", ".join(f"{k} = {v}" for k, v in _listed(spec.noise_settings).items())
     first = summary.iloc[0]
     return (
         f"input: {spec.input} ({settings}); records' rms {first['input_rms_mean']:.4g}, "
