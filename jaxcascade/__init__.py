@@ -47,7 +47,10 @@ Measured data and the model-error loop
     `residual_tests`, `ResidualTests`, `regime_from_switches`, `plot_residual_tests`,
     `residual_figures`, `save_residual_figures`; `model_error_loop`, `LoopResult`,
     `EFFECTS`, `Effect`, `ExtendedModel`, `simulate_extended`, `ARNoise`; `ARX`,
-    `fit_arx`, `best_arx`; `nrmse`, `fit_percent`.
+    `fit_arx`, `best_arx`; `nrmse`, `fit_percent`; `benchmark_data`, `Benchmark`,
+    `BenchmarkRecord`, `BENCHMARKS` (the community's benchmarks of nonlinearbenchmark.org,
+    read from their MAT files and split as the official loader `nonlinear-benchmarks` does,
+    with each test record's `n_init` and the published baselines).
 
 Nothing here changes JAX's configuration: enable float64 yourself where you need it
 (`jax.config.update("jax_enable_x64", True)`); the command line does.
@@ -66,6 +69,12 @@ _MODULES = {
         "ARX",
         "best_arx",
         "fit_arx",
+    ),
+    "._benchmark_data": (
+        "BENCHMARKS",
+        "Benchmark",
+        "BenchmarkRecord",
+        "benchmark_data",
     ),
     "._changing": (
         "Change",

@@ -18,6 +18,7 @@ LAYERS = [
     {"_estimator", "_efficiency"},
     {
         "_data",
+        "_benchmark_data",
         "_inputs",
         "_arx",
         "_hysteresis",
