@@ -23,7 +23,11 @@ import scipy.signal
 from ._validate import MAX_MAGNITUDE
 
 _FORMATS = {".csv": "csv", ".txt": "csv", ".parquet": "parquet", ".pq": "parquet"}
-_SCALINGS = ("none", "standard", "scale")
+_SCALINGS = ("none", "standard", "scale", "auto")
+# `"auto"` scaling centres the input (and the output) when fewer than this fraction of
+# the input's samples lie on one side of zero: the cascade's static block bends at zero,
+# so zero must lie inside the record's operating range.
+AUTO_SIDE_FRACTION = 0.05
 _FILTERS = ("fir", "iir")
 # Largest single IIR decimation step scipy recommends for its Chebyshev filter.
 _MAX_IIR_STEP = 13
@@ -69,10 +73,18 @@ class Scaling:
         - `"none"`: identity.
         - `"standard"`: subtract the mean and divide by the standard deviation.
         - `"scale"`: divide by the standard deviation only (zero stays zero).
+        - `"auto"`: `"scale"` when the input has at least `AUTO_SIDE_FRACTION` (5 %) of its
+          samples on each side of zero, `"standard"` otherwise (an input that never
+          crosses zero, a positive voltage or a level, is centred, so that the static
+          block's breakpoint at zero lies in the operating range). `method` records the
+          rule chosen.
         """
         if method not in _SCALINGS:
             raise ValueError(f"Unknown scaling {method!r}; use one of {', '.join(_SCALINGS)}.")
         u, y = np.asarray(u, dtype=np.float64), np.asarray(y, dtype=np.float64)
+        if method == "auto":
+            side = min(np.mean(u > 0), np.mean(u < 0)) if u.size else 0.0
+            method = "scale" if side >= AUTO_SIDE_FRACTION else "standard"
         if method == "none":
             return cls(method="none")
         centre = method == "standard"
@@ -229,7 +241,7 @@ def read_record(
       `resample_poly` with odd-symmetric edge padding so the ends are not pulled to zero)
       or `"iir"` (`scipy.signal.decimate`'s order-8 Chebyshev I run forward and backward,
       in steps of at most 13).
-    - `scaling`: `"standard"`, `"scale"`, `"none"` (see `Scaling.from_data`, computed
+    - `scaling`: `"standard"`, `"scale"`, `"auto"`, `"none"` (see `Scaling.from_data`, computed
       after decimation), or a `Scaling` to reuse, e.g. the estimation record's for a
       validation record.
     - `orders`: an `Orders`; the record must hold at least `orders.min_samples` samples.

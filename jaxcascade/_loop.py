@@ -485,8 +485,10 @@ def model_error_loop(
 
     **Arguments:**
 
-    - `u_est`, `y_est`, `u_val`, `y_val`: 1-D arrays (model units), each record at least
-      `orders.min_samples` long (`_validate.record`: a `ValueError` otherwise). `u_est`,
+    - `u_est`, `y_est`, `u_val`, `y_val`: 1-D arrays (model units); the estimation
+      records together at least `orders.min_samples` long (`check_lengths`), the
+      validation record `init_samples + MIN_SCORED` (`check_scored_length`: it is
+      simulated, not fitted); a `ValueError` otherwise. `u_est`,
       `y_est` may be lists of several estimation records, estimated jointly (each
       simulated from its own initial state; the declared cascade's first fit is on the
       records joined end to end, then refined on each).
@@ -514,11 +516,13 @@ def model_error_loop(
     if len(us) != len(ys):
         raise ValueError(f"model_error_loop: {len(us)} input records but {len(ys)} outputs.")
     pairs = [
-        record(u, y, orders=orders, where=f"model_error_loop (estimation record {i + 1})")
+        record(u, y, where=f"model_error_loop (estimation record {i + 1})")
         for i, (u, y) in enumerate(zip(us, ys, strict=True))
     ]
     us, ys = tuple(p[0] for p in pairs), tuple(p[1] for p in pairs)
-    u_val, y_val = record(u_val, y_val, orders=orders, where="model_error_loop (validation)")
+    check_lengths([int(u.shape[0]) for u in us], orders, where="model_error_loop")
+    u_val, y_val = record(u_val, y_val, where="model_error_loop (validation)")
+    check_scored_length(int(u_val.shape[0]), init_samples, "model_error_loop (validation)")
     u_val_np, y_val_np = np.asarray(u_val, float), np.asarray(y_val, float)
 
     def assess(model):
@@ -577,6 +581,9 @@ def model_error_loop(
         }
         for name, action in [(n, "add") for n in tried] + [(n, "replace") for n in replacing]:
             c = _candidate(name, *fit_against, **judged_by, action=action)
+            if c is None:
+                say(f"  {name:<24} no start on these records; not tried")
+                continue
             round_candidates.append(c)
             # Each candidate compiles programs of its own structure (about a hundred
             # memory mappings each, measured on the damper): freed past a bound, so
@@ -642,6 +649,48 @@ def model_error_loop(
     )
 
 
+# A scored record (validation, test) is simulated, not fitted: it needs the state
+# initialisation window and this many scored samples after it.
+MIN_SCORED = 20
+
+
+def check_lengths(lengths: list[int], orders: Orders, where: str = "the loop") -> None:
+    """The estimation records' lengths: together at least `orders.min_samples` (10 per
+    parameter, counted over every estimation record), each longer than the linear
+    block's lags; a one-sentence `ValueError` otherwise."""
+    total = sum(lengths)
+    if total < orders.min_samples:
+        which = (
+            "the estimation record has"
+            if len(lengths) == 1
+            else (f"the {len(lengths)} estimation records have together")
+        )
+        raise ValueError(
+            f"{where}: {which} {total} samples, fewer than the {orders.min_samples} that "
+            f"orders {orders} need (Orders.min_samples, counted over every estimation "
+            "record); use longer or more records or lower orders."
+        )
+    shortest = min(lengths)
+    lags = max(orders.r, orders.p) + 2
+    if shortest < lags:
+        raise ValueError(
+            f"{where}: an estimation record has {shortest} samples, fewer than the {lags} "
+            f"that the linear block's lags (orders {orders}) need; drop it or join it to "
+            "another."
+        )
+
+
+def check_scored_length(length: int, init_samples: int, where: str) -> None:
+    """A scored record needs its initialisation window and `MIN_SCORED` samples after."""
+    needed = int(init_samples) + MIN_SCORED
+    if length < needed:
+        raise ValueError(
+            f"{where}: the record has {length} samples, fewer than the {needed} a scored "
+            f"record needs ({int(init_samples)} to set the state and {MIN_SCORED} scored); "
+            "use a longer record or fewer --init-samples."
+        )
+
+
 def _candidate(name, model, current, failed, round_, us, ys, records, assess, **options):
     """Fit the effect `name` added to `model` (`action="add"`), or in place of its cascade
     (`action="replace"`: the effect's path from the input plus a fitted output offset,
@@ -664,6 +713,8 @@ def _candidate(name, model, current, failed, round_, us, ys, records, assess, **
             fitted, cost, _ = refit(model, start, us, ys, effect.refine_steps)
             if best is None or cost < best[1]:
                 best = (fitted, cost, start.label)
+        if best is None:
+            return None  # no start on these records (a segment where the input never goes)
         fitted, _, label = best
     evaluation = assess(fitted)
     # The evidence of every record: the validation record out of sample and the

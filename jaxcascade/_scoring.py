@@ -45,6 +45,9 @@ class RecordScore:
     error_from_rest: float
     window_error_from_rest: float | None
     init_samples: int
+    # root-mean-square error of the initialised simulation on `[n, T)`, in the record's
+    # units (the benchmarks' figure; model units where the record is scaled)
+    rmse: float = float("nan")
 
     @property
     def headline(self) -> float:
@@ -87,7 +90,14 @@ def score_record(
         score(y, rest),
         window_rest,
         n,
+        _rmse(y[n:], full),
     )
+
+
+def _rmse(y, simulated) -> float:
+    with np.errstate(over="ignore", invalid="ignore"):
+        value = float(np.sqrt(np.mean((y - simulated) ** 2)))
+    return value if np.isfinite(value) else float("inf")
 
 
 def verdict(final: list[RecordScore], arx: list[RecordScore]) -> list[str]:

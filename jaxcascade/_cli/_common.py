@@ -33,10 +33,10 @@ class Parser(argparse.ArgumentParser):
         raise CLIError(f"{message} (see '{self.prog} --help')")
 
 
-def add_record_arguments(parser, *, scaling: str) -> None:
+def add_record_arguments(parser, *, scaling: str, required: bool = True) -> None:
     """Options shared by the commands that read a measured record (`fit`, `loop`)."""
-    parser.add_argument("--input", required=True, help="input column")
-    parser.add_argument("--output", required=True, help="output column")
+    parser.add_argument("--input", required=required, help="input column")
+    parser.add_argument("--output", required=required, help="output column")
     parser.add_argument("--time", default=None, help="optional time column")
     parser.add_argument(
         "--orders",
@@ -48,8 +48,11 @@ def add_record_arguments(parser, *, scaling: str) -> None:
     parser.add_argument(
         "--scaling",
         default=scaling,
-        choices=("none", "scale", "standard"),
-        help=f"units the model is fitted in; estimates are also mapped back (default {scaling})",
+        choices=("none", "scale", "standard", "auto"),
+        help="units the model is fitted in: none, scale (divide by the std), standard "
+        "(centre and scale), auto (scale, or standard when the input has fewer than 5 %% of "
+        "its samples on one side of zero); estimates are also mapped back "
+        f"(default {scaling})",
     )
 
 

@@ -31,6 +31,8 @@ def _markdown(report: dict, command: str) -> str:
     from .._metrics import fit_percent
 
     lines = ["# Model-error loop report", ""]
+    if report.get("benchmark"):
+        lines += _benchmark_table(report["benchmark"])
     # First: the final model against the trivial ones, on every scored record.
     lines += [*(f"**{sentence}**" for sentence in report["verdict"])]
     if not report["verdict"]:
@@ -130,6 +132,47 @@ def _markdown(report: dict, command: str) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _benchmark_table(bench: dict) -> list[str]:
+    """The report's first table on a benchmark: test RMSE in its unit of the declared
+    cascade, the final model, the ARX peer and the published baselines, per test set."""
+    tests = bench["tests"]
+    names = [t["record"] for t in tests]
+    lines = [
+        f"## {bench['name']}: test RMSE ({bench['unit']}), free-run simulation, state set on "
+        f"the first {bench['n_init']} samples ({bench['loader']})",
+        "",
+        "| model | " + " | ".join(names) + " |",
+        "|---|" + "---|" * len(names),
+    ]
+    for label, key in (
+        ("declared cascade", "declared_test_rmse"),
+        ("final model", "test_rmse"),
+        ("linear ARX peer (this run)", "arx_test_rmse"),
+    ):
+        lines.append(f"| {label} | " + " | ".join(f"{t[key]:.4g}" for t in tests) + " |")
+    published = sorted({k for t in tests for k in t["published"]})
+    for key in published:
+        values = [t["published"].get(key) for t in tests]
+        lines.append(
+            f"| {key.replace('_', ' ')} (published) | "
+            + " | ".join("-" if v is None else f"{v:.4g}" for v in values)
+            + " |"
+        )
+    lines += [
+        "",
+        "Final model: "
+        + "; ".join(
+            f"{t['record']}: NRMSE {t['test_nrmse']:.4f}, fit {t['test_fit_percent']:.1f} %"
+            for t in tests
+        )
+        + f". Published figures: {bench['published_source']}. Estimation and validation "
+        f"records from the training data: {bench['split_rule']} (MAX = {bench['max_samples']});"
+        f" decimation {bench['decimation']}.",
+        "",
+    ]
+    return lines
+
+
 def _p(test) -> str:
     if not test:
         return "-"
@@ -179,7 +222,6 @@ def run_loop(args) -> int:
     import numpy as np
 
     from .._arx import best_arx
-    from .._data import Scaling, read_record
     from .._estimator._robust import Robust
     from .._loop import initialised_output, model_error_loop, simulated_output
     from .._plot._loop import plot_compare
@@ -197,28 +239,22 @@ def run_loop(args) -> int:
         raise CLIError(f"--min-gain must be in [0, 1), got {args.min_gain}.")
     if args.retries < 0:
         raise CLIError(f"--retries must be >= 0, got {args.retries}.")
-    if args.init_samples < 0:
+    if args.init_samples is not None and args.init_samples < 0:
         raise CLIError(f"--init-samples must be >= 0, got {args.init_samples}.")
-    options = dict(time_column=args.time, decimate=args.decimate, orders=orders)
-    raw = [
-        read_record(path, args.input, args.output, scaling="none", **options) for path in args.train
-    ]
-    scaling = Scaling.from_data(
-        np.concatenate([r.u for r in raw]), np.concatenate([r.y for r in raw]), args.scaling
-    )
-    training = [
-        dataclasses.replace(
-            r, u=scaling.input_to_model(r.u), y=scaling.output_to_model(r.y), scaling=scaling
-        )
-        for r in raw
-    ]
-    validation = read_record(args.validate, args.input, args.output, scaling=scaling, **options)
-    window = _window(args.window, args.decimate, len(validation))
-    tests = [
-        read_record(path, args.input, args.output, scaling=scaling, **options)
-        for path in args.test or []
-    ]
-    test_windows = _windows(args.test_window, args.decimate, tests)
+    if args.benchmark:
+        training, validation, tests, bench = _benchmark_records(args, orders)
+        window, test_windows = None, [None] * len(tests)
+        if args.window or args.test_window:
+            raise CLIError("--window and --test-window do not apply with --benchmark.")
+    else:
+        training, validation, tests = _file_records(args, orders)
+        bench = None
+        window = _window(args.window, args.decimate, len(validation))
+        test_windows = _windows(args.test_window, args.decimate, tests)
+    if args.init_samples is None:
+        # the benchmark's own window (in samples after decimation), else 50
+        args.init_samples = 50 if bench is None else -(-bench.n_init // args.decimate)
+    scaling = training[0].scaling
     if args.report:
         writable_folder(args.report, "--report")
 
@@ -279,7 +315,10 @@ def run_loop(args) -> int:
         full[f"window_error_{key}"] = s.window_error
         full[f"error_{key}_from_rest"] = s.error_from_rest
         full[f"window_error_{key}_from_rest"] = s.window_error_from_rest
-    full["scores"] = [s.to_dict() for s in scores]
+    # RMSE in the records' own units (the scaling is affine: an error scales by y_scale)
+    full["scores"] = [{**s.to_dict(), "rmse": s.rmse * scaling.y_scale} for s in scores]
+    if bench is not None:
+        full["benchmark"] = _benchmark_summary(bench, scores, scaling, args)
     full["test"] = [
         {
             "record": s.record,
@@ -314,6 +353,8 @@ def run_loop(args) -> int:
     keys += ("effect_added", "actions", "structure_before", "structure_after")
     keys += ("significance", "candidates", "residual_tests", "standard_errors_after")
     keys += ("test", "verdict", "programs_compiled")
+    if bench is not None:
+        keys += ("benchmark",)
     if window is not None:
         keys += ("window_error_before", "window_error_after")
         keys += ("window_error_before_from_rest", "window_error_after_from_rest")
@@ -338,7 +379,7 @@ def run_loop(args) -> int:
             folder / "compare.png",
             arx=arx.simulate(validation.u),
             title=f"validation record {_name(validation)}: measured vs free-run simulation",
-            units=_units(args.output, args.scaling),
+            units=_units(args.output or "y", scaling.method),
             init=(time[init_from], time[scored_from]) if scored_from > init_from else None,
             scored=(time[scored_from], time[(window[1] if window else len(time)) - 1]),
         )
@@ -354,7 +395,195 @@ def run_loop(args) -> int:
     return 0
 
 
+def _benchmark_summary(bench, scores, scaling, args) -> dict:
+    """`"benchmark"` of the JSON: per test record the test RMSE in the benchmark's unit
+    (initialised simulation over `y[n_init:]`), NRMSE and fit % of the final model, the
+    declared cascade's and the ARX peer's RMSE, and the published baselines."""
+    from .._metrics import fit_percent
+
+    factor = scaling.y_scale * bench.unit_factor
+    tests = []
+    for record in bench.test:
+        row = {
+            s.model: s
+            for s in scores
+            if s.role == "test"
+            and s.record.startswith(bench.name)
+            and s.record == f"{bench.name} {record.name}"
+        }
+        final, declared, arx = row["final model"], row["declared cascade"], row["linear ARX"]
+        published = dict(bench.published.get(record.name, {}))
+        best_linear = min(
+            (v for k, v in published.items() if k in ("linear_state_space", "linear_arx")),
+            default=None,
+        )
+        tests.append(
+            {
+                "record": record.name,
+                "samples": len(record.u),
+                "test_rmse": final.rmse * factor,
+                "test_nrmse": final.error,
+                "test_fit_percent": fit_percent(final.error),
+                "declared_test_rmse": declared.rmse * factor,
+                "arx_test_rmse": arx.rmse * factor,
+                "arx_test_nrmse": arx.error,
+                "beats_arx": bool(final.rmse < arx.rmse),
+                "best_linear_published": best_linear,
+                "beats_best_linear": None
+                if best_linear is None
+                else bool(final.rmse * factor < best_linear),
+                "published": published,
+            }
+        )
+    out = {
+        "name": bench.name,
+        "unit": bench.unit,
+        "n_init": bench.n_init,
+        "n_init_model_samples": args.init_samples,
+        "loader": f"nonlinear-benchmarks {bench.loader}",
+        "sampling_time": bench.sampling_time,
+        "decimation": args.decimate,
+        "max_samples": args.max_samples,
+        "split_rule": BENCHMARK_RULE,
+        "published_source": "Champneys et al. (2024), arXiv 2405.10779, free-run test RMSE",
+        "tests": tests,
+    }
+    if len(tests) == 1:
+        out.update({k: tests[0][k] for k in ("test_rmse", "test_nrmse", "arx_test_rmse")})
+        out["published"] = tests[0]["published"]
+    return out
+
+
+def _file_records(args, orders):
+    """Estimation, validation and test records read from the files on the command line,
+    all in the estimation records' scaling."""
+    import numpy as np
+
+    from .._data import Scaling, read_record
+
+    missing = [
+        option
+        for option, value in (
+            ("TRAIN", args.train),
+            ("--validate", args.validate),
+            ("--input", args.input),
+            ("--output", args.output),
+        )
+        if not value
+    ]
+    if missing:
+        raise CLIError(
+            f"loop needs {', '.join(missing)} (or --benchmark NAME --data ROOT); see "
+            "jaxcascade loop --help."
+        )
+    # Lengths are checked by the loop: the estimation records together, a scored record
+    # against its initialisation window.
+    options = dict(time_column=args.time, decimate=args.decimate)
+    raw = [
+        read_record(path, args.input, args.output, scaling="none", **options) for path in args.train
+    ]
+    scaling = Scaling.from_data(
+        np.concatenate([r.u for r in raw]), np.concatenate([r.y for r in raw]), args.scaling
+    )
+    training = [
+        dataclasses.replace(
+            r, u=scaling.input_to_model(r.u), y=scaling.output_to_model(r.y), scaling=scaling
+        )
+        for r in raw
+    ]
+    validation = read_record(args.validate, args.input, args.output, scaling=scaling, **options)
+    tests = [
+        read_record(path, args.input, args.output, scaling=scaling, **options)
+        for path in args.test or []
+    ]
+    return training, validation, tests
+
+
+def _benchmark_records(args, orders):
+    """Estimation, validation and test records of a benchmark (`BENCHMARK_RULE`)."""
+    import numpy as np
+
+    from .._benchmark_data import benchmark_data
+    from .._data import Scaling, record_from_arrays
+
+    if args.train or args.validate or args.test:
+        raise CLIError(
+            "--benchmark takes its records from the benchmark's files: drop TRAIN, "
+            "--validate and --test."
+        )
+    if not args.data:
+        raise CLIError("--benchmark needs --data ROOT, the folder that holds NAME/ as distributed.")
+    if args.max_samples < 100:
+        raise CLIError(f"--max-samples must be >= 100, got {args.max_samples}.")
+    bench = benchmark_data(args.benchmark, args.data)
+    parts = benchmark_split(
+        [(r.name, np.asarray(r.u, float), np.asarray(r.y, float)) for r in bench.train],
+        args.max_samples,
+    )
+    u_all = np.concatenate([u for _, u, _ in parts["estimation"]])
+    y_all = np.concatenate([y for _, _, y in parts["estimation"]])
+    scaling = Scaling.from_data(u_all, y_all, args.scaling)
+
+    def build(name, u, y):
+        return record_from_arrays(
+            u,
+            y,
+            sample_period=bench.sampling_time,
+            decimate=args.decimate,
+            scaling=scaling,
+            source=f"{bench.name} {name}",
+            input_column=args.input or "u",
+            output_column=args.output or "y",
+        )
+
+    training = [build(*part) for part in parts["estimation"]]
+    validation = build(*parts["validation"])
+    tests = [build(r.name, np.asarray(r.u, float), np.asarray(r.y, float)) for r in bench.test]
+    return training, validation, tests, bench
+
+
+# The rule that cuts estimation and validation records from a benchmark's training data,
+# the same for every benchmark (`benchmark_split`).
+BENCHMARK_RULE = (
+    "validation: the last quarter of the last training record, at most MAX/4 samples; "
+    "estimation: every other training record and the samples of the last one before the "
+    "validation part, the latest MAX samples of them in all (MAX = --max-samples)"
+)
+
+
+def benchmark_split(records, max_samples: int) -> dict:
+    """`records`: `[(name, u, y), ...]`, the benchmark's training records in order.
+    Returns `{"estimation": [(name, u, y), ...], "validation": (name, u, y), "cut": ...}`
+    by `BENCHMARK_RULE`; names carry the sample ranges."""
+    *others, (name, u, y) = records
+    T = len(u)
+    quarter = min(T // 4, max_samples // 4)
+    cut = T - quarter
+    validation = (f"{name} [{cut}:{T}]", u[cut:], y[cut:])
+    estimation = [(name_, u_, y_) for name_, u_, y_ in others] + [
+        (f"{name} [0:{cut}]", u[:cut], y[:cut])
+    ]
+    # the latest max_samples estimation samples: whole records from the last backwards,
+    # the earliest one cut at its end part
+    kept, budget = [], max_samples
+    for name_, u_, y_ in reversed(estimation):
+        if budget <= 0:
+            break
+        if len(u_) > budget:
+            first = len(u_) - budget
+            base, _, span = name_.partition(" [")
+            start = int(span.split(":")[0]) if span else 0
+            stop = start + len(u_)
+            name_ = f"{base} [{start + first}:{stop}]"
+            u_, y_ = u_[first:], y_[first:]
+        kept.append((name_, u_, y_))
+        budget -= len(u_)
+    return {"estimation": kept[::-1], "validation": validation}
+
+
 def _name(record) -> str:
+    if record.source and not pathlib.Path(record.source).exists():
+        return record.source  # a benchmark's record: its name
     return pathlib.Path(record.source).name if record.source else "arrays"
 
 
@@ -414,13 +643,37 @@ def add_parser(subparsers) -> None:
             "--decimate 8 --window 3072:7680 --json",
             "jaxcascade loop a.csv --validate b.csv --test c.csv --test-window 6144:14336 "
             "--input u --output y --init-samples 50 --report results/loop",
+            "jaxcascade loop --benchmark CED --data ../shared/data/nonlinear_benchmarks "
+            "--report results/ced --json",
         ),
     )
     parser.add_argument(
-        "train", nargs="+", help="estimation record(s) (CSV or Parquet), estimated jointly"
+        "train", nargs="*", help="estimation record(s) (CSV or Parquet), estimated jointly"
     )
-    parser.add_argument("--validate", required=True, help="validation record")
-    add_record_arguments(parser, scaling="scale")
+    parser.add_argument("--validate", default=None, help="validation record (required with TRAIN)")
+    parser.add_argument(
+        "--benchmark",
+        default=None,
+        metavar="NAME",
+        help="a nonlinear system-identification benchmark read from --data: EMPS, CED, "
+        "Silverbox, Cascaded_Tanks, WienerHammerBenchMark (its official split; estimation "
+        "and validation records cut from its training data by one rule; its test records "
+        "scored with its n_init, RMSE in its unit)",
+    )
+    parser.add_argument(
+        "--data",
+        default=None,
+        metavar="ROOT",
+        help="with --benchmark: the folder holding NAME/ as the benchmark is distributed",
+    )
+    parser.add_argument(
+        "--max-samples",
+        type=int,
+        default=10000,
+        help="with --benchmark: at most this many estimation samples (the latest of the "
+        "training data) and a quarter of it for validation (default 10000)",
+    )
+    add_record_arguments(parser, scaling="auto", required=False)
     parser.add_argument(
         "--max-effects",
         type=int,
@@ -458,11 +711,11 @@ def add_parser(subparsers) -> None:
     parser.add_argument(
         "--init-samples",
         type=int,
-        default=50,
+        default=None,
         help="N: on every scored record the model's state (never its parameters) is set "
         "from the measured output on the N samples (after decimation) before the scored "
         "ones, the nonlinear benchmarks' convention; from-rest figures are reported beside "
-        "(default 50; 0 scores from rest only)",
+        "(default 50, with --benchmark the benchmark's n_init; 0 scores from rest only)",
     )
     parser.add_argument(
         "--dm-threshold",

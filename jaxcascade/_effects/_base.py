@@ -390,6 +390,8 @@ class PwlSegment(Effect):
     signature: ClassVar[tuple[str, ...]] = ("level", "u2_e", "u2_e2", "cross_correlation")
     description: ClassVar[str] = "one more breakpoint (segment) in the static input nonlinearity"
     quantiles: ClassVar[tuple[float, ...]] = (0.2, 0.4, 0.6, 0.8)
+    # samples an input needs on one side of zero before a segment is tried there
+    min_side: ClassVar[int] = 20
 
     @classmethod
     def starts(cls, model, u, y, residual):
@@ -406,6 +408,10 @@ class PwlSegment(Effect):
             old_D = [p[f"{D_name}{i}"] for i in range(1, n)]
             old_M = [p[f"{M_name}{i}"] for i in range(1, n + 1)]
             part = u[u > 0] if side == "right" else -u[u < 0]
+            if part.size < cls.min_side:
+                # an input that (almost) never reaches this side of zero: a segment there
+                # has no samples to be fitted on
+                continue
             vectors = []
             for q in cls.quantiles:
                 D = float(np.quantile(part, q)) * (1 if side == "right" else -1)

@@ -1,0 +1,180 @@
+"""Issue 32: the model-error loop on the community's nonlinear benchmarks, default settings.
+
+    python benchmarks/nonlinear_benchmarks.py --data ../shared/data/nonlinear_benchmarks
+        [--out results/nonlinear_benchmarks] [--only CED,EMPS] [--overwrite] [-- LOOP ARGS]
+
+Each benchmark is `jaxcascade loop --benchmark NAME --data ROOT --report OUT/NAME --json`
+in a fresh process with the loop's defaults (arguments after `--` are passed on to every
+run and recorded), timed, its peak resident memory (`wait4`), its largest count of
+memory mappings and the programs it compiled recorded (`brfd.run_loop`). The loop reads
+the benchmark's official split (`jc.benchmark_data`, the `nonlinear-benchmarks` loader's),
+cuts an estimation and a validation record from the training data by its one rule
+(`jaxcascade loop --help`, `--max-samples`), and scores every official test record as
+the collection does: free-run simulation, the state set on the first `n_init` samples
+from the measured output, RMSE of `y[n_init:]` in the benchmark's unit.
+
+Written as it goes: each finished run leaves OUT/NAME/report.json and resources.json, and
+a later call skips it (`--overwrite` runs it again); OUT/summary.csv and OUT/README.md are
+rebuilt from every finished run. The published baselines come from the reader
+(Champneys et al. 2024); no figure is typed in here.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import os
+import pathlib
+import platform
+import subprocess
+import sys
+
+sys.path.insert(0, str(pathlib.Path(__file__).parent))
+
+from brfd import run_loop  # noqa: E402
+
+NAMES = ("CED", "EMPS", "Silverbox")
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--data", default="../shared/data/nonlinear_benchmarks")
+    parser.add_argument("--out", default="results/nonlinear_benchmarks")
+    parser.add_argument("--only", default=None, help="NAME,NAME of the benchmarks to run")
+    parser.add_argument("--overwrite", action="store_true", help="run finished ones again")
+    parser.add_argument("extra", nargs="*", help="after --: passed on to jaxcascade loop")
+    args = parser.parse_args(argv)
+    names = NAMES if args.only is None else tuple(args.only.split(","))
+    out = pathlib.Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    for name in names:
+        report = out / name
+        if (report / "resources.json").exists() and not args.overwrite:
+            print(f"{name}: finished earlier ({report}); skipped", file=sys.stderr)
+            continue
+        report.mkdir(parents=True, exist_ok=True)
+        loop = ["loop", "--benchmark", name, "--data", args.data, "--report", str(report)]
+        loop += ["--json", *args.extra]
+        print(f"{name}: jaxcascade {' '.join(loop)}", file=sys.stderr, flush=True)
+        measured = run_loop(loop)
+        stdout = measured.pop("stdout")
+        resources = {
+            **measured,
+            "command": "jaxcascade " + " ".join(loop),
+            "machine": _machine(),
+            "load_before": os.getloadavg()[0],
+            "date": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
+            "commit": _commit(),
+        }
+        if measured["returncode"] != 0:
+            resources["error"] = stdout[-2000:]
+        (report / "resources.json").write_text(json.dumps(resources, indent=1))
+        write_summary(out)
+    write_summary(out)
+    return 0
+
+
+def _machine() -> str:
+    model = ""
+    try:
+        for line in pathlib.Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                model = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return f"{model or platform.processor()}, {os.cpu_count()} cores"
+
+
+def _commit() -> str:
+    try:
+        return subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=True
+        ).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
+def write_summary(out: pathlib.Path) -> None:
+    """OUT/summary.csv (one row per test set) and OUT/README.md from the finished runs."""
+    import pandas as pd
+
+    rows, notes = [], []
+    for folder in sorted(p for p in out.iterdir() if p.is_dir()):
+        resources_path = folder / "resources.json"
+        if not resources_path.exists():
+            continue
+        resources = json.loads(resources_path.read_text())
+        report_path = folder / "report.json"
+        if resources["returncode"] != 0 or not report_path.exists():
+            notes.append(
+                f"- {folder.name}: the run ended with exit code {resources['returncode']}: "
+                f"{(resources.get('error') or '').strip().splitlines()[-1:]}"
+            )
+            continue
+        report = json.loads(report_path.read_text())
+        bench = report["benchmark"]
+        for test in bench["tests"]:
+            rows.append(
+                {
+                    "benchmark": bench["name"],
+                    "test": test["record"],
+                    "unit": bench["unit"],
+                    "n_init": bench["n_init"],
+                    "final_rmse": test["test_rmse"],
+                    "final_nrmse": test["test_nrmse"],
+                    "final_fit_percent": test["test_fit_percent"],
+                    "declared_rmse": test["declared_test_rmse"],
+                    "arx_rmse": test["arx_test_rmse"],
+                    "best_linear_published": test["best_linear_published"],
+                    "beats_arx": test["beats_arx"],
+                    "beats_best_linear": test["beats_best_linear"],
+                    "structure": report["structure_after"],
+                    "effects": ",".join(report["effect_added"]) or "none",
+                    "seconds": round(resources["seconds"], 1),
+                    "peak_rss_mb": round(resources["peak_rss_mb"]),
+                    "programs_compiled": report["programs_compiled"],
+                    "decimation": bench["decimation"],
+                    "max_samples": bench["max_samples"],
+                    "loader": bench["loader"],
+                    "commit": resources["commit"],
+                    "machine": resources["machine"],
+                    "load_before": round(resources["load_before"], 2),
+                    "date": resources["date"],
+                    "command": resources["command"],
+                }
+            )
+    table = pd.DataFrame(rows)
+    table.to_csv(out / "summary.csv", index=False)
+    lines = [
+        "# The model-error loop on the nonlinear benchmarks (default settings)",
+        "",
+        "Written by `python benchmarks/nonlinear_benchmarks.py --data "
+        "../shared/data/nonlinear_benchmarks` (each run's command, machine, load, date and "
+        "commit in `summary.csv` and `NAME/resources.json`; each run's report in `NAME/`).",
+        "Test RMSE in the benchmark's unit: free-run simulation, the state set from the "
+        "measured output on the first `n_init` samples, RMSE of `y[n_init:]`. Published: "
+        "Champneys et al. (2024), arXiv 2405.10779, the better of its linear state-space and "
+        "linear ARX rows.",
+        "",
+        "| benchmark | test | unit | final model | declared cascade | ARX peer (this run) | "
+        "best linear (published) | below both | effects | s | peak RSS MB | programs |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        below = r["beats_arx"] and bool(r["beats_best_linear"])
+        best = r["best_linear_published"]
+        lines.append(
+            f"| {r['benchmark']} | {r['test']} | {r['unit']} | {r['final_rmse']:.4g} | "
+            f"{r['declared_rmse']:.4g} | {r['arx_rmse']:.4g} | "
+            f"{'-' if best is None else f'{best:.4g}'} | {'yes' if below else 'no'} | "
+            f"{r['effects']} | {r['seconds']} | {r['peak_rss_mb']} | {r['programs_compiled']} |"
+        )
+    if notes:
+        lines += ["", "Runs that did not finish:", "", *notes]
+    (out / "README.md").write_text("\n".join(lines) + "\n")
+
+
+if __name__ == "__main__":
+    sys.exit(main())

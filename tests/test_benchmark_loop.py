@@ -1,0 +1,110 @@
+"""`jaxcascade loop --benchmark NAME --data ROOT`: the split rule, the scored records' length
+rule, one-line errors, and a run on CED's records as distributed (issue 32)."""
+
+import json
+import pathlib
+
+import numpy as np
+import pytest
+
+from jaxcascade._cli import main
+from jaxcascade._cli._loop import benchmark_split
+
+ROOT = pathlib.Path(__file__).resolve().parents[2] / "shared" / "data" / "nonlinear_benchmarks"
+needs_data = pytest.mark.skipif(
+    not (ROOT / "CED" / "DATAUNIF.MAT").exists(),
+    reason="the benchmarks' files live in ../shared/data/nonlinear_benchmarks",
+)
+
+
+def _records(*lengths):
+    return [
+        (f"train {i + 1}", np.arange(n, dtype=float), np.arange(n, dtype=float))
+        for i, n in enumerate(lengths)
+    ]
+
+
+def test_split_holds_out_the_last_quarter_of_the_last_training_record():
+    parts = benchmark_split(_records(400, 400), max_samples=10000)
+    assert [name for name, _, _ in parts["estimation"]] == ["train 1", "train 2 [0:300]"]
+    name, u, _ = parts["validation"]
+    assert name == "train 2 [300:400]" and u[0] == 300 and len(u) == 100
+    # the estimation and validation parts cover the training data once
+    assert sum(len(u) for _, u, _ in parts["estimation"]) + len(u) == 800
+
+
+def test_split_of_a_long_record_keeps_the_latest_samples():
+    parts = benchmark_split(_records(24841), max_samples=10000)
+    ((name, u, _),) = parts["estimation"]
+    v_name, v, _ = parts["validation"]
+    assert v_name == "train 1 [22341:24841]" and len(v) == 2500
+    assert name == "train 1 [12341:22341]" and len(u) == 10000 and u[-1] + 1 == v[0]
+
+
+def test_split_drops_whole_early_records_past_the_budget():
+    parts = benchmark_split(_records(5000, 5000, 8000), max_samples=8000)
+    names = [name for name, _, _ in parts["estimation"]]
+    assert names == ["train 2 [3000:5000]", "train 3 [0:6000]"]
+    assert sum(len(u) for _, u, _ in parts["estimation"]) == 8000
+
+
+def test_scored_records_need_only_their_initialisation_and_a_few_samples():
+    from jaxcascade import Orders
+    from jaxcascade._loop import MIN_SCORED, check_lengths, check_scored_length
+
+    check_scored_length(100, 10, "validation")  # CED's 100-sample records
+    with pytest.raises(ValueError, match="fewer than the 30 a scored record needs"):
+        check_scored_length(29, 10, "validation")
+    assert MIN_SCORED == 20
+    # estimation samples are counted over every record
+    check_lengths([60, 60], Orders(2, 2, 2, 2))
+    with pytest.raises(ValueError, match="2 estimation records have together 119 samples"):
+        check_lengths([60, 59], Orders(2, 2, 2, 2))
+
+
+@pytest.mark.parametrize(
+    "argv, words",
+    [
+        (["loop"], "loop needs TRAIN, --validate, --input, --output"),
+        (["loop", "--benchmark", "CED"], "--benchmark needs --data"),
+        (["loop", "x.csv", "--benchmark", "CED", "--data", "."], "drop TRAIN"),
+        (["loop", "--benchmark", "Nope", "--data", "."], "EMPS"),
+        (["loop", "--benchmark", "CED", "--data", "/nonexistent"], "DATAUNIF.MAT"),
+        (["loop", "--benchmark", "CED", "--data", ".", "--max-samples", "10"], "--max-samples"),
+    ],
+)
+def test_benchmark_option_errors_are_one_line(capsys, argv, words):
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in err, err
+    assert words in err, err
+
+
+@needs_data
+def test_loop_on_ced_scores_every_test_set_in_its_unit(capsys, tmp_path):
+    """The declared cascade alone (`--max-effects 0`): the benchmark's records, its split,
+    its n_init and unit, the published baselines beside the figures."""
+    argv = ["loop", "--benchmark", "CED", "--data", str(ROOT), "--max-effects", "0"]
+    argv += ["--retries", "0", "--json", "--quiet", "--report", str(tmp_path)]
+    assert main(argv) == 0
+    out = json.loads(capsys.readouterr().out)
+    bench = out["benchmark"]
+    assert bench["name"] == "CED" and bench["unit"] == "ticks/s" and bench["n_init"] == 10
+    assert [t["record"] for t in bench["tests"]] == ["test 1", "test 2"]
+    for test in bench["tests"]:
+        assert np.isfinite(test["test_rmse"]) and test["test_rmse"] > 0
+        assert np.isfinite(test["arx_test_rmse"]) and test["arx_test_rmse"] > 0
+        assert test["published"]["linear_state_space"] > 0
+        assert test["best_linear_published"] == min(
+            test["published"]["linear_state_space"], test["published"]["linear_arx"]
+        )
+    assert out["init_samples"] == 10
+    full = json.loads((tmp_path / "report.json").read_text())
+    estimation = [r["source"] for r in full["records"]["estimation"]]
+    assert estimation == ["CED train 1", "CED train 2 [0:300]"]
+    assert full["records"]["validation"]["source"] == "CED train 2 [300:400]"
+    assert all(r["sample_period"] == 0.02 for r in full["records"]["test"])
+    report = (tmp_path / "report.md").read_text()
+    first = report.split("\n## ", 2)[1]
+    assert first.startswith("CED: test RMSE (ticks/s)")
+    assert "linear state space (published)" in first and "linear ARX peer" in first
