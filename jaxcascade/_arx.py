@@ -45,6 +45,11 @@ class ARX:
     def orders(self) -> tuple[int, int]:
         return len(self.a), len(self.b)
 
+    @property
+    def largest_pole(self) -> float:
+        """The largest pole magnitude of `1 / A(q)` (1 or more: not stable)."""
+        return float(np.max(np.abs(np.roots(np.concatenate([[1.0], self.a])))))
+
 
 def fit_arx(u, y, na: int, nb: int) -> ARX:
     """Least-squares ARX fit of orders `(na, nb)` with a constant term."""
@@ -58,18 +63,22 @@ def fit_arx(u, y, na: int, nb: int) -> ARX:
     return ARX(theta[:na], theta[na : na + nb], float(theta[-1]))
 
 
-def best_arx(u, y, max_order: int = 4) -> ARX:
+def best_arx(u, y, max_order: int = 4, stable: bool = True) -> ARX:
     """The ARX orders up to `max_order` with the lowest free-run error on `(u, y)`,
-    among the stable fits."""
+    among the stable fits (`stable`; a `ValueError` when none is), or among every fit
+    whose free-run error is finite (`stable=False`: the peer of an output that integrates
+    its input, whose equation-error fits all have a pole on the unit circle)."""
     best, best_error = None, np.inf
     for na in range(1, max_order + 1):
         for nb in range(1, max_order + 1):
             model = fit_arx(u, y, na, nb)
-            if np.any(np.abs(np.roots(np.concatenate([[1.0], model.a]))) >= 1):
+            if stable and model.largest_pole >= 1:
                 continue
-            error = np.mean((y - model.simulate(u)) ** 2)
-            if error < best_error:
+            with np.errstate(over="ignore", invalid="ignore"):
+                error = np.mean((y - model.simulate(u)) ** 2)
+            if np.isfinite(error) and error < best_error:
                 best, best_error = model, error
     if best is None:
-        raise ValueError("No stable ARX model up to order 4 fits this record.")
+        kind = "stable " if stable else ""
+        raise ValueError(f"No {kind}ARX model up to order {max_order} fits this record.")
     return best

@@ -130,17 +130,41 @@ def _errors(model: ExtendedModel, groups) -> Array:
     return jnp.concatenate([(jax.vmap(one)(U, Y) * M).reshape(-1) for U, Y, M in groups])
 
 
+# Input samples kept beyond the outermost breakpoints in a refit (at least this many, and
+# 1 % of the samples): a segment fitted on a handful of samples at the record's edge is
+# not determined by it (`fit`'s identifiability rule) and extrapolates wildly.
+MIN_BEYOND = 10
+
+
+def breakpoint_bounds(us) -> np.ndarray:
+    """`[low, high]`: the range the cascade's breakpoints may take in a refit on the
+    records `us`, `MIN_BEYOND` samples (or 1 %) inside the input's extremes; the
+    extremes themselves where that side of zero holds too few samples."""
+    u = np.sort(np.concatenate([np.asarray(v, float).ravel() for v in us]))
+    k = min(max(MIN_BEYOND, u.size // 100), u.size // 4)
+    low, high = u[k], u[-k - 1]
+    return np.array([low if low < 0 else u[0], high if high > 0 else u[-1]])
+
+
 @eqx.filter_jit
-def _refit(vectors, new: Effect, current: ExtendedModel, groups, orders: Orders, max_steps: int):
+def _refit(
+    vectors,
+    new: Effect,
+    current: ExtendedModel,
+    groups,
+    orders: Orders,
+    max_steps: int,
+    bounds,
+):
     """Output-error refit of the current model with `new` added, from a batch of starts
     (`vmap` over `vectors` and the leading axis of `new`'s parameters), on the packed
     records `groups` (`pack`), each simulated from its own initial state. The cascade
-    is refined in its admissible parameterisation (`_estimator._refine`), every effect's
+    is refined in its admissible parameterisation (`_estimator._refine`; breakpoints
+    within `bounds`, `breakpoint_bounds`), every effect's
     free parameters alongside; fixed ones (`Effect.fixed`) are held. Without the cascade
     (`ExtendedModel.cascade` False) only the effects are refined."""
     dtype = groups[0][0].dtype
-    u_min = jnp.min(jnp.stack([jnp.min(U) for U, _, _ in groups]))
-    u_max = jnp.max(jnp.stack([jnp.max(U) for U, _, _ in groups]))
+    u_min, u_max = bounds[0].astype(dtype), bounds[1].astype(dtype)
     size = orders.size if current.cascade else 0
 
     def one(vector, effect):
@@ -175,8 +199,9 @@ def refit(model: ExtendedModel, start: Start, u, y, max_steps: int = 150):
     groups = pack(us, ys)
     dtype = groups[0][0].dtype
     effect = jax.tree_util.tree_map(lambda leaf: jnp.asarray(leaf, dtype), start.effect)
+    bounds = jnp.asarray(breakpoint_bounds(us), dtype)
     models, costs, status = _refit(
-        jnp.asarray(start.vectors, dtype), effect, model, groups, start.orders, max_steps
+        jnp.asarray(start.vectors, dtype), effect, model, groups, start.orders, max_steps, bounds
     )
     costs = np.asarray(costs)
     best = int(np.argmin(np.where(np.isfinite(costs), costs, np.inf)))

@@ -30,6 +30,7 @@ LAYERS = [
         "_testing",
         "_initial_state",
         "_scoring",
+        "_integrating",
     },
     {"_montecarlo"},
     {"_plot", "_benchmark"},

@@ -34,6 +34,8 @@ def _markdown(report: dict, command: str) -> str:
     if report.get("benchmark"):
         lines += _benchmark_table(report["benchmark"])
     # First: the final model against the trivial ones, on every scored record.
+    if report.get("integrating"):
+        lines += [report["integrating"]["sentence"], ""]
     lines += [*(f"**{sentence}**" for sentence in report["verdict"])]
     if not report["verdict"]:
         lines.append(
@@ -262,6 +264,38 @@ def run_loop(args) -> int:
         if not args.quiet:
             print(message, file=sys.stderr, flush=True)
 
+    # An output that integrates its input (no stable ARX fits it) is modelled through its
+    # difference and integrated back for scoring (`_integrating`).
+    integrating = None
+    if args.integrate != "no":
+        from .._integrating import integrates
+
+        pole = integrates(
+            np.concatenate([r.u for r in training]), np.concatenate([r.y for r in training])
+        )
+        if args.integrate == "yes" or pole is not None:
+            integrating = {"largest_arx_pole": pole, "option": args.integrate}
+    scored_records = (validation, tests)
+    if integrating is not None:
+        from .._integrating import differenced
+
+        training = [differenced(r) for r in training]
+        validation = differenced(validation)
+        integrating["sentence"] = (
+            "The output integrates its input"
+            + (
+                f" (no stable linear ARX model fits it; the best one's largest pole is at "
+                f"|z| = {pole:.4f})"
+                if pole is not None
+                else ""
+            )
+            + ": a stable model cannot follow it in free run, so the loop models its "
+            "difference y(t) - y(t-1) and integrates the model's output back for scoring, "
+            "its position set from the measured output like any other state (--integrate no "
+            "turns this off)."
+        )
+        say(integrating["sentence"])
+
     result = model_error_loop(
         [r.u for r in training],
         [r.y for r in training],
@@ -274,7 +308,7 @@ def run_loop(args) -> int:
         progress=say,
         effects=_effects(args.effects),
         robust=Robust(retries=args.retries),
-        init_samples=args.init_samples,
+        init_samples=max(args.init_samples - 1, 0) if integrating else args.init_samples,
         t_threshold=args.dm_threshold,
         min_gain=args.min_gain,
         key=jax.random.PRNGKey(args.seed),
@@ -282,7 +316,16 @@ def run_loop(args) -> int:
     full = result.to_dict()
     full["robust"] = {"retries": args.retries, "seed": args.seed}
     # The ARX peer is fitted on the estimation records joined end to end.
-    arx = best_arx(np.concatenate([r.u for r in training]), np.concatenate([r.y for r in training]))
+    u_all = np.concatenate([r.u for r in training])
+    y_all = np.concatenate([r.y for r in training])
+    unstable_arx = None
+    try:
+        arx = best_arx(u_all, y_all)
+    except ValueError:
+        # every equation-error fit has a pole on or outside the unit circle (an output
+        # that integrates, with --integrate no): the best finite one is the peer
+        arx = best_arx(u_all, y_all, stable=False)
+        unstable_arx = arx.largest_pole
     say("scoring on the validation and test records (initialised and from rest)")
     models = {
         "declared cascade": (
@@ -298,6 +341,11 @@ def run_loop(args) -> int:
             lambda u, y, start, n: arx.simulate(u, y, start)[start:],
         ),
     }
+    if integrating is not None:
+        from .._integrating import integrated
+
+        models = {name: integrated(*pair) for name, pair in models.items()}
+        validation = scored_records[0]  # scored as measured, the output integrated back
     scored = [("validation", validation, window)]
     scored += [("test", r, w) for r, w in zip(tests, test_windows, strict=True)]
     scores = [
@@ -307,6 +355,14 @@ def run_loop(args) -> int:
     ]
     by_model = {name: [s for s in scores if s.model == name] for name in models}
     warnings = verdict(by_model["final model"], by_model["linear ARX"])
+    if unstable_arx is not None:
+        warnings.append(
+            "No stable linear ARX model fits the estimation records (the best one's largest "
+            f"pole is at |z| = {unstable_arx:.4f}): the output integrates its input, which a "
+            "stable model cannot follow in free run; leave --integrate at auto (the loop "
+            "then models the output's difference) or model the loop closed around the output."
+        )
+    full["integrating"] = integrating
     valid = {s.model: s for s in scores if s.role == "validation"}
     full["init_samples"] = args.init_samples
     for key, model in (("before", "declared cascade"), ("after", "final model")):
@@ -335,6 +391,8 @@ def run_loop(args) -> int:
     full["arx"] = {
         "na": arx.orders[0],
         "nb": arx.orders[1],
+        "largest_pole": arx.largest_pole,
+        "stable": unstable_arx is None,
         "error": a.error,
         "window_error": a.window_error,
         "error_from_rest": a.error_from_rest,
@@ -352,7 +410,7 @@ def run_loop(args) -> int:
     keys += ("prediction_error_before", "prediction_error_after", "init_samples")
     keys += ("effect_added", "actions", "structure_before", "structure_after")
     keys += ("significance", "candidates", "residual_tests", "standard_errors_after")
-    keys += ("test", "verdict", "programs_compiled")
+    keys += ("test", "verdict", "programs_compiled", "integrating")
     if bench is not None:
         keys += ("benchmark",)
     if window is not None:
@@ -367,19 +425,26 @@ def run_loop(args) -> int:
 
         pd.DataFrame(full["candidates"]).to_csv(folder / "candidates.csv", index=False)
         pd.DataFrame(full["scores"]).to_csv(folder / "scores.csv", index=False)
-        period = validation.sample_period
-        time = np.arange(len(validation)) * (period or 1.0)
-        scored_from = window[0] if window is not None else args.init_samples
+        # the loop's own validation record: the output's difference when integrating
+        shown = validation
+        units = _units(args.output or "y", scaling.method)
+        if integrating is not None:
+            from .._integrating import differenced
+
+            shown, units = differenced(validation), f"difference of {units}"
+        period = shown.sample_period
+        time = np.arange(len(shown)) * (period or 1.0)
+        scored_from = window[0] if window is not None else min(args.init_samples, len(shown) - 2)
         init_from = max(scored_from - args.init_samples, 0)
         plot_compare(
             time,
-            validation.y,
+            shown.y,
             result.before.simulated,
             result.after.simulated if result.added else None,
             folder / "compare.png",
-            arx=arx.simulate(validation.u),
-            title=f"validation record {_name(validation)}: measured vs free-run simulation",
-            units=_units(args.output or "y", scaling.method),
+            arx=arx.simulate(shown.u),
+            title=f"validation record {_name(shown)}: measured vs free-run simulation",
+            units=units,
             init=(time[init_from], time[scored_from]) if scored_from > init_from else None,
             scored=(time[scored_from], time[(window[1] if window else len(time)) - 1]),
         )
@@ -669,9 +734,9 @@ def add_parser(subparsers) -> None:
     parser.add_argument(
         "--max-samples",
         type=int,
-        default=10000,
+        default=5000,
         help="with --benchmark: at most this many estimation samples (the latest of the "
-        "training data) and a quarter of it for validation (default 10000)",
+        "training data) and a quarter of it for validation (default 5000)",
     )
     add_record_arguments(parser, scaling="auto", required=False)
     parser.add_argument(
@@ -743,6 +808,14 @@ def add_parser(subparsers) -> None:
         default=2,
         help="repeats of the robust fit's multi-start from fresh draws while its estimate "
         "fails the residual test (default 2)",
+    )
+    parser.add_argument(
+        "--integrate",
+        default="auto",
+        choices=("auto", "yes", "no"),
+        help="model the output through its difference y(t) - y(t-1), integrated back for "
+        "scoring: auto (default) when no stable linear ARX model fits the estimation "
+        "records (an output that integrates its input, a position under feedback)",
     )
     parser.add_argument("--report", default=None, help="folder for the report and figures")
     parser.add_argument("--json", action="store_true", help="print the JSON summary")

@@ -1,0 +1,60 @@
+"""Outputs that integrate their input: modelled through their difference (host side).
+
+A position under feedback (EMPS: a motor's force in, the load's position out) integrates
+its input: no stable model, the cascade or a linear ARX, follows it in free run, and every
+equation-error ARX fit has a pole on the unit circle. Such a record is modelled through
+its difference `dy(t) = y(t) - y(t-1)` (a velocity), which the cascade can describe, and
+the model's output is integrated back for scoring, its position set from the measured
+output as any other state:
+
+- from rest: `y(0) = 0`, `y(t) = sum of dy(1..t)`;
+- initialised on `[start - n, start)`: the difference model's state set on the measured
+  differences of that window, and `y(t) = y_measured(start - 1) + sum of dy(start..t)`.
+
+`integrates(u, y)` is the test: no stable ARX model up to order 4 fits the record
+(`_arx.best_arx`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from ._arx import best_arx
+
+
+def integrates(u, y) -> float | None:
+    """The largest pole magnitude of the best ARX fit when no stable ARX model fits
+    `(u, y)` (the output integrates its input), else None."""
+    try:
+        best_arx(u, y)
+    except ValueError:
+        return best_arx(u, y, stable=False).largest_pole
+    return None
+
+
+def differenced(record):
+    """A `_data.Record` with its output replaced by the output's difference (one sample
+    shorter: `u[1:]`, `y[1:] - y[:-1]`)."""
+    time = None if record.time is None else record.time[1:]
+    return dataclasses.replace(record, u=record.u[1:], y=np.diff(record.y), time=time)
+
+
+def integrated(from_rest, initialised):
+    """Position forms of a difference model's scoring functions (`_scoring`): `from_rest(u)`
+    and `initialised(u, y, start, n)` of the *difference* model, on the *measured* record
+    `(u, y)`. Returns the pair for the integrated output."""
+
+    def rest(u):
+        u = np.asarray(u, float)
+        return np.concatenate([[0.0], np.cumsum(np.asarray(from_rest(u[1:]), float))])
+
+    def init(u, y, start, n):
+        u, y = np.asarray(u, float), np.asarray(y, float)
+        start = max(int(start), 1)
+        dy = np.diff(y)
+        steps = np.asarray(initialised(u[1:], dy, start - 1, max(int(n) - 1, 0)), float)
+        return y[start - 1] + np.cumsum(steps)
+
+    return rest, init
