@@ -11,8 +11,8 @@ output as any other state:
 - initialised on `[start - n, start)`: the difference model's state set on the measured
   differences of that window, and `y(t) = y_measured(start - 1) + sum of dy(start..t)`.
 
-`integrates(u, y)` is the test: no stable ARX model up to order 4 fits the record
-(`_arx.best_arx`).
+`integrates(u, y)` is the test: no stable ARX model up to order 4 fits the record, or the
+best one has a pole within 1e-3 of the unit circle (`_arx.best_arx`).
 """
 
 from __future__ import annotations
@@ -24,14 +24,20 @@ import numpy as np
 from ._arx import best_arx
 
 
+# A pole this close to 1 (or beyond) in the ARX peer is an integrator: at 1 kHz it is a
+# time constant of 1 s held for ever in free run.
+INTEGRATOR_POLE = 0.999
+
+
 def integrates(u, y) -> float | None:
-    """The largest pole magnitude of the best ARX fit when no stable ARX model fits
-    `(u, y)` (the output integrates its input), else None."""
+    """The largest pole magnitude of the best ARX fit of `(u, y)` when it is at least
+    `INTEGRATOR_POLE` or no stable ARX model fits (the output integrates its input), else
+    None."""
     try:
-        best_arx(u, y)
+        pole = best_arx(u, y).largest_pole
     except ValueError:
         return best_arx(u, y, stable=False).largest_pole
-    return None
+    return pole if pole >= INTEGRATOR_POLE else None
 
 
 def differenced(record):

@@ -108,3 +108,23 @@ def test_loop_on_ced_scores_every_test_set_in_its_unit(capsys, tmp_path):
     first = report.split("\n## ", 2)[1]
     assert first.startswith("CED: test RMSE (ticks/s)")
     assert "linear state space (published)" in first and "linear ARX peer" in first
+
+
+def test_an_integrating_output_is_scored_through_its_difference():
+    from jaxcascade._integrating import integrated, integrates
+
+    rng = np.random.default_rng(0)
+    u = rng.normal(size=400)
+    y = np.concatenate([[0.0], np.cumsum(2 * u[1:])])  # y(t) = y(t-1) + 2 u(t)
+    # a difference model that is exact: dy = 2 u
+    rest, init = integrated(lambda v: 2 * v, lambda v, dy, start, n: (2 * v)[start:])
+    np.testing.assert_allclose(rest(u), y, atol=1e-12)
+    for start in (1, 10, 399):
+        np.testing.assert_allclose(init(u, y, start, 10), y[start:], atol=1e-12)
+    # a random walk driven by its input integrates; a stable filter of it does not
+    walk = np.concatenate([[0.0], np.cumsum(2 * u[:-1])])  # y(t) = y(t-1) + 2 u(t-1)
+    pole = integrates(u, walk + 0.01 * rng.normal(size=400))
+    assert pole is not None and pole >= 0.999
+    import scipy.signal
+
+    assert integrates(u, scipy.signal.lfilter([0, 1], [1, -0.8], u)) is None
