@@ -23,7 +23,6 @@ import numpy as np
 
 from ._arx import best_arx
 
-
 # A pole this close to 1 (or beyond) in the ARX peer is an integrator: at 1 kHz it is a
 # time constant of 1 s held for ever in free run.
 INTEGRATOR_POLE = 0.999
