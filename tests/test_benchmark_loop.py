@@ -81,6 +81,16 @@ def test_benchmark_option_errors_are_one_line(capsys, argv, words):
 
 
 @needs_data
+@pytest.mark.slow  # the whole loop with the defaults: about three minutes
+def test_loop_on_ced_with_the_defaults_beats_the_linear_peer(capsys, tmp_path):
+    argv = ["loop", "--benchmark", "CED", "--data", str(ROOT), "--json", "--quiet"]
+    assert main(argv) == 0
+    bench = json.loads(capsys.readouterr().out)["benchmark"]
+    for test in bench["tests"]:
+        assert test["test_rmse"] < test["arx_test_rmse"], test
+
+
+@needs_data
 def test_loop_on_ced_scores_every_test_set_in_its_unit(capsys, tmp_path):
     """The declared cascade alone (`--max-effects 0`): the benchmark's records, its split,
     its n_init and unit, the published baselines beside the figures."""
@@ -128,3 +138,14 @@ def test_an_integrating_output_is_scored_through_its_difference():
     import scipy.signal
 
     assert integrates(u, scipy.signal.lfilter([0, 1], [1, -0.8], u)) is None
+
+
+@needs_data
+@pytest.mark.slow  # the whole loop on EMPS and Silverbox with the defaults: tens of minutes
+@pytest.mark.parametrize("name", ["EMPS", "Silverbox"])
+def test_loop_on_the_long_benchmarks_runs_to_the_end(capsys, tmp_path, name):
+    argv = ["loop", "--benchmark", name, "--data", str(ROOT), "--json", "--quiet"]
+    argv += ["--report", str(tmp_path)]
+    assert main(argv) == 0
+    bench = json.loads(capsys.readouterr().out)["benchmark"]
+    assert bench["tests"] and all(np.isfinite(t["test_rmse"]) for t in bench["tests"])
