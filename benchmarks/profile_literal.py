@@ -2,7 +2,7 @@
 timed on its own, on the same batch.
 
     python benchmarks/profile_literal.py [--batch 250] [--rounds 10] [--backend auto]
-                                         [--out results/profile_literal.md]
+                                         [--commit REF] [--out results/profile_literal.md]
 
 The workload is `jaxcascade bench`'s (Example 1, N 4000, SNR 25, 20 iterations; the
 bench runs its 1000 realisations as 4 batches of 250). Each stage is one program
@@ -31,15 +31,31 @@ stopping rule: a few operations per record) reads slightly negative: next to not
 Per-step stages run at the iterate after 10 steps. Compare runs taken in one
 sitting. Run it from the repository root with `PYTHONPATH=.` to profile the checkout,
 not an installed copy.
+
+`--commit REF` profiles an older commit's package with this script: REF is checked out
+into a temporary `git worktree` (`git worktree add --detach`, removed afterwards), and
+this file runs there, from the worktree's root with `PYTHONPATH` set to it (so the
+table's commit is REF's). Issue 22's before / after pair, in one sitting:
+
+    python benchmarks/profile_literal.py --rounds 10 --commit 71498f6 \
+        --out results/profile_literal_before.md
+    PYTHONPATH=. python benchmarks/profile_literal.py --rounds 10 \
+        --out results/profile_literal_after.md
 """
 
 from __future__ import annotations
 
 import argparse
+import os
+import pathlib
 import platform
 import statistics
 import subprocess
+import sys
+import tempfile
 import time
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
 
 STEP_STAGES = ("normal equations", "solve", "standard errors", "stopping rule", "cycle detection")
 
@@ -50,7 +66,14 @@ def main(argv=None) -> int:
     parser.add_argument("--rounds", type=int, default=10)
     parser.add_argument("--backend", default="auto", choices=("auto", "xla", "fused"))
     parser.add_argument("--out", default=None, help="also write the table (Markdown)")
+    parser.add_argument(
+        "--commit",
+        default=None,
+        help="profile this commit's package (this script, run in a temporary worktree at it)",
+    )
     args = parser.parse_args(argv)
+    if args.commit:
+        return at_commit(args)
 
     import jax
 
@@ -212,6 +235,39 @@ def main(argv=None) -> int:
         with open(args.out, "w") as file:
             file.write(text + "\n")
     return 0
+
+
+def at_commit(args) -> int:
+    """This script on `args.commit`'s package: a temporary worktree at the commit (removed
+    afterwards), this file run from its root with `PYTHONPATH` set to it; the same options,
+    `--out` relative to the current folder."""
+    forwarded = ["--batch", str(args.batch), "--rounds", str(args.rounds)]
+    forwarded += ["--backend", args.backend]
+    if args.out:
+        forwarded += ["--out", str(pathlib.Path(args.out).resolve())]
+    with tempfile.TemporaryDirectory(prefix="profile_literal_") as scratch:
+        tree = pathlib.Path(scratch) / "tree"
+        added = subprocess.run(
+            ["git", "worktree", "add", "--detach", str(tree), args.commit],
+            cwd=ROOT,
+            capture_output=True,
+            text=True,
+        )
+        if added.returncode != 0:
+            print(f"profile_literal: cannot check out {args.commit}: {added.stderr.strip()}")
+            return 2
+        try:
+            env = dict(os.environ, PYTHONPATH=str(tree))
+            script = pathlib.Path(__file__).resolve()
+            return subprocess.run(
+                [sys.executable, str(script), *forwarded], cwd=tree, env=env
+            ).returncode
+        finally:
+            subprocess.run(
+                ["git", "worktree", "remove", "--force", str(tree)],
+                cwd=ROOT,
+                capture_output=True,
+            )
 
 
 if __name__ == "__main__":

@@ -1,8 +1,11 @@
 #!/usr/bin/env bash
 # Regenerate results/ with the committed commands, one after another (never two
-# benchmarks at once: timings would be wrong). About an hour on 2 cores.
-#   bash benchmarks/run_all.sh            # every step
+# benchmarks at once: timings would be wrong; `stability` runs two of its loops at once,
+# as its committed tables were made). The whole run has not been timed; it takes hours on
+# 2 cores (`stability` alone about 25 minutes: results/brfd_stability/resources.csv).
+#   bash benchmarks/run_all.sh            # every step (the list is printed first)
 #   bash benchmarks/run_all.sh sweeps     # only the named steps
+#   bash benchmarks/run_all.sh list       # the steps and their commands, nothing run
 set -euo pipefail
 cd "$(dirname "$0")/.."
 export JAXCASCADE_CACHE=${JAXCASCADE_CACHE:-off}   # compile times reported cold
@@ -12,6 +15,13 @@ bench() {  # issue 6: throughput vs NumPy/SciPy and the FLOP floor; scaling
     python benchmarks/bench_history.py results/bench.json   # a row in results/bench_history.csv
     jaxcascade bench --backend xla --out results/bench_xla.csv --json > results/bench_xla.json
     python benchmarks/scaling.py --out results/scaling.csv
+}
+profile() {  # issue 22: the literal iteration's stages, before (71498f6, from a temporary
+    # worktree that the script adds and removes) and after (this checkout), one sitting
+    python benchmarks/profile_literal.py --rounds 10 --commit 71498f6 \
+        --out results/profile_literal_before.md
+    PYTHONPATH=. python benchmarks/profile_literal.py --rounds 10 \
+        --out results/profile_literal_after.md
 }
 bench_robust() {  # issue 16: robust on example1, example2 and the random family, 256 records each
     python benchmarks/bench_robust.py --out results/bench_robust
@@ -56,6 +66,21 @@ loop() {  # issue 5: undeclared effects, and the measured friction-damper record
         --init-samples 50 --max-effects 2 --all-records \
         --effects backlash_friction,backlash_friction_contacts,slack_friction,prandtl_ishlinskii,dahl_friction,output_offset,colored_noise
 }
+stability() {  # issue 21, point 3: the loop's decision with retries 0/2 x seeds 0-2, both
+    # directions, and the four main runs again; two loops at a time (--jobs 2: their wall
+    # times in resources.csv overlap)
+    python benchmarks/brfd.py --data "${BRFD_DATA:-../shared/data/brfd}" --out results/brfd_stability \
+        --decimate 16 --init-samples 50 --max-effects 2 --stability --jobs 2 \
+        --effects backlash_friction,backlash_friction_contacts,slack_friction,prandtl_ishlinskii,dahl_friction,output_offset,colored_noise
+}
+backlash() {  # issues 15 and 21: each hysteresis effect alone on the damper (effects.md);
+    # the fitted backlash_friction initialised from 50/20/100 samples (initial_state.md)
+    python benchmarks/brfd_effect.py --data "${BRFD_DATA:-../shared/data/brfd}" --decimate 16 \
+        --effects backlash_friction,backlash_friction_contacts,slack_friction,prandtl_ishlinskii,dahl_friction \
+        --out results/brfd_backlash/effects.md
+    python benchmarks/brfd_initial_state.py --data "${BRFD_DATA:-../shared/data/brfd}" --decimate 16 \
+        --n 50,20,100 --effect backlash_friction --out results/brfd_backlash/initial_state.md
+}
 reproduce() {  # issue 2: the paper's examples
     for ex in 1 2; do for snr in 25 inf; do for est in literal robust; do
         jaxcascade reproduce --example $ex --snr $snr --estimator $est --out results/reproduce \
@@ -82,9 +107,25 @@ noise() {  # issue 24: pem under AR(1) noise drawn by the script; the noise stud
     rm -rf results/noise_study   # per-cell tables: the script resumes from them
     python benchmarks/noise_study.py --realisations 200 --out results/noise_study
 }
+nonlinear() {  # issue 32: the loop on the community's nonlinear benchmarks (reads the
+    # shared MAT files); the script skips finished runs, so old reports go first
+    rm -rf results/nonlinear_benchmarks
+    python benchmarks/nonlinear_benchmarks.py --data "${NLB_DATA:-../shared/data/nonlinear_benchmarks}" \
+        --out results/nonlinear_benchmarks
+}
 
+all=(bench profile bench_robust distributed robust sweeps literal efficiency loop stability backlash
+    reproduce recursive inputs noise nonlinear)
 steps=("$@")
-[ ${#steps[@]} -gt 0 ] || steps=(bench bench_robust distributed robust sweeps literal efficiency loop reproduce recursive inputs noise)
+if [ "${steps[*]}" = list ]; then
+    for step in "${all[@]}"; do declare -f "$step"; done
+    exit 0
+fi
+[ ${#steps[@]} -gt 0 ] || steps=("${all[@]}")
+for step in "${steps[@]}"; do
+    declare -F "$step" > /dev/null || { echo "run_all.sh: no step '$step' (steps: ${all[*]})" >&2; exit 2; }
+done
+echo "run_all.sh: ${steps[*]}"
 for step in "${steps[@]}"; do
     echo "== $step"
     "$step"
