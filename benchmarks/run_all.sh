@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Regenerate results/ with the committed commands, one after another (never two
-# benchmarks at once: timings would be wrong; `stability` runs two of its loops at once,
-# as its committed tables were made). The whole run has not been timed; it takes hours on
-# 2 cores (`stability` alone about 25 minutes: results/brfd_stability/resources.csv).
+# benchmarks at once: timings would be wrong; `loop` and `stability` run two of their
+# loops at once, as their committed tables were made). The whole run has not been
+# timed (on 2 cores `stability` alone took about 25 minutes: the wall times in
+# results/brfd_stability/resources.csv, two at a time).
 #   bash benchmarks/run_all.sh            # every step (the list is printed first)
 #   bash benchmarks/run_all.sh sweeps     # only the named steps
 #   bash benchmarks/run_all.sh list       # the steps and their commands, nothing run
@@ -63,7 +64,7 @@ efficiency() {  # issue 13: literal and robust against the Cramer-Rao bound
 loop() {  # issue 5: undeclared effects, and the measured friction-damper records
     python benchmarks/effects_loop.py --out results/effects_loop
     python benchmarks/brfd.py --data "${BRFD_DATA:-../shared/data/brfd}" --out results/brfd --decimate 16 \
-        --init-samples 50 --max-effects 2 --all-records \
+        --init-samples 50 --max-effects 2 --all-records --jobs 2 \
         --effects backlash_friction,backlash_friction_contacts,slack_friction,prandtl_ishlinskii,dahl_friction,output_offset,colored_noise
 }
 stability() {  # issue 21, point 3: the loop's decision with retries 0/2 x seeds 0-2, both
