@@ -17,6 +17,10 @@ class Status(enum.IntEnum):
       stopped without a usable estimate (see each `message`).
     - `no_improvement`: a fit that ended where it started, or whose simulation explains
       less than the output's mean does (robust).
+    - `tracking`: an on-line estimate (recursive) that had not settled at the noise level
+      when the record ended; it follows the data but is not yet an estimate of a fixed
+      system, so it counts as a failure. (Codes never change: a new status gets the next
+      number.)
     """
 
     converged = 0
@@ -27,6 +31,7 @@ class Status(enum.IntEnum):
     failed = 5
     cycled = 6
     no_improvement = 7
+    tracking = 8
 
     @property
     def message(self) -> str:
@@ -38,7 +43,10 @@ class Status(enum.IntEnum):
 
 
 _MESSAGES = {
-    Status.converged: "the estimate stopped changing (within its tolerance)",
+    Status.converged: (
+        "the estimate stopped changing (within its tolerance; an on-line estimate, also "
+        "with its prediction error at the noise level it estimates)"
+    ),
     Status.max_iterations: "the iteration budget ran out before the estimate settled",
     Status.diverged: "the estimate became non-finite or grew without bound",
     Status.singular: (
@@ -54,6 +62,12 @@ _MESSAGES = {
         "the fit explains none of the output: its simulation error is not below the "
         "output's variance (NRMSE >= 1), or the estimate never moved from a start that "
         "was no estimate itself"
+    ),
+    Status.tracking: (
+        "the on-line estimate had not settled when the record ended: over its last "
+        "window it still moved by more than its standard errors allow, or its prediction "
+        "error stayed above the noise level it estimates (0 where the output rests "
+        "exactly, as noise-free) or above a fifth of the output's spread"
     ),
     Status.cycled: (
         "the paper's iteration settled into a short cycle between neighbouring estimates "

@@ -65,6 +65,8 @@ def test_reproduce_json_and_files(number, capsys, tmp_path):
         "example",
         "iterations",
         "status",
+        "message",
+        "settings",
         "cycle_amplitude",
         "estimates",
         "true",

@@ -64,7 +64,10 @@ def test_the_scan_equals_the_numpy_loop_where_breakpoints_are_held():
         np.asarray(u), np.asarray(y), ex.orders, lam=0.93, input_range=BOUNDS
     )
     np.testing.assert_allclose(np.asarray(got.params.to_vector()), want, rtol=0, atol=1e-6)
-    assert int(got.status) == Status.converged
+    # noise-free and 0.87 from the truth (`results/recursive_noise_free.md`): not
+    # `converged`, which this test asserted before the status was defined (issue 35)
+    assert np.max(np.abs(np.asarray(got.params.to_vector() - ex.params().to_vector()))) > 0.5
+    assert int(got.status) == Status.tracking
 
 
 @pytest.mark.parametrize(("number", "gradient"), [(1, False), (2, False), (2, True)])

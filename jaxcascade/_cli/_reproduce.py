@@ -2,11 +2,15 @@
 
 One record of an example is simulated (input uniform in (-2, 2), output noise at the
 given SNR), fitted (default: the literal iteration from the paper's initial values), and
-the parameter trajectories are drawn per block as in the paper's figures.
+the parameter trajectories are drawn per block as in the paper's figures. With `--snr
+inf` an estimator that declares settings for a noise-free record (`noise_free`: the
+recursive estimator's constant memory and Gauss-Newton gain, `_recursive.NOISE_FREE`)
+runs with them; the output names the settings used.
 """
 
 from __future__ import annotations
 
+import math
 import pathlib
 
 from ._common import CLIError, estimator_help, examples, strict_json, writable_folder
@@ -91,6 +95,8 @@ def reproduce(args) -> int:
         raise CLIError(f"--estimator: {error}") from None
     takes = "max_iterations" in registered.settings()
     settings = {"max_iterations": args.max_iterations} if takes else {}
+    if math.isinf(args.snr):  # noise-free: the estimator's own noise-free settings
+        settings |= dict(getattr(registered, "noise_free", {}))
     solution, truth = run_example(ex, args.seed, args.snr, name=args.estimator, **settings)
     status = Status(int(solution.status)).name
     iterations = int(solution.iterations)
@@ -98,9 +104,12 @@ def reproduce(args) -> int:
     tag = f"example{ex.number}_snr{args.snr:g}_seed{args.seed}"
     if args.estimator != "literal":
         tag += f"_{args.estimator}"
+    used = {k: v for k, v in settings.items() if k != "max_iterations"}
+    named = ", ".join(f"{k}={v}" for k, v in used.items())
     title = (
         f"Example {ex.number}, N = {ex.n_samples}, SNR = {args.snr:g}, seed {args.seed}, "
-        f"{args.estimator} estimator: {status} after {iterations} iterations"
+        f"{args.estimator} estimator{f' ({named})' if named else ''}: {status} after "
+        f"{iterations} iterations"
     )
     table.to_csv(out / f"{tag}_estimates.csv", index=False)
     header = (
@@ -118,6 +127,8 @@ def reproduce(args) -> int:
                     "example": ex.number,
                     "iterations": iterations,
                     "status": status,
+                    "message": Status[status].message,
+                    "settings": used,
                     "cycle_amplitude": float(solution.cycle_amplitude),
                     "estimates": solution.params.to_dict(),
                     "true": truth,
@@ -126,6 +137,7 @@ def reproduce(args) -> int:
         )
     else:
         print(title)
+        print(f"{status}: {Status[status].message}")
         print(table.to_string(index=False, float_format=lambda v: f"{v: .6f}"))
         print(f"written: {out / tag}_{{estimates.csv,estimates.md,convergence.png}}")
     return 0
@@ -153,7 +165,13 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--example", type=_example_number, required=True, help="1 or 2")
     parser.add_argument("--seed", type=int, default=0, help="PRNG seed of the record (default 0)")
     parser.add_argument(
-        "--snr", type=float, default=25.0, help="sqrt(var y / var e); inf = noise-free (default 25)"
+        "--snr",
+        type=float,
+        default=25.0,
+        help=(
+            "sqrt(var y / var e); inf = noise-free, with the estimator's noise-free settings "
+            "where it has them (recursive: gradient=True, lam=0.95) (default 25)"
+        ),
     )
     parser.add_argument(
         "--max-iterations",

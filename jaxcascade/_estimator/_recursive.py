@@ -69,6 +69,52 @@ steps on the prediction error, not steps of the fixed-point map. The error it co
 is the same `yc(t) - phi(t) theta`, so the truth stays an exact fixed point. From the
 same starts 189 of the 200 reached 1e-6 (all 1e-3).
 
+**What "converged" means.** An on-line estimate never stops by itself: the status is
+read at the end of the record from its last window (`settle_window = 400` samples, fewer
+when less is left after the first iteration). It is `converged` only when both hold:
+
+1. *settled*: every coefficient of the regression (eq. 18, breakpoints as `D M`) moved
+   over the window by at most `settle_tolerance = 3` standard errors, `s sqrt(P_ii)`
+   with `P` the recursion's covariance at the end (the full `P` with `gradient=True`)
+   and `s` the RMS a-priori error of the window's updating samples, plus rounding
+   (`sqrt(eps) (1 + |theta_i|)`: 1.5e-8 in float64);
+2. *at the noise level*: the window's RMS prediction error (a dead-zone sample's error,
+   the output's step `e(t) - e(t-1)`, counted half) is at most `noise_tolerance = 3`
+   times the noise level the recursion estimates, plus rounding (`sqrt(eps)` times the
+   output's RMS), and at most a fifth of the output's spread. The noise level comes
+   from the samples the estimate puts in the backlash's dead zone (g1 = g2 = 0), where
+   the noiseless output does not move and the error is `e(t) - e(t-1)`: their lower
+   quartile (robust to samples put there wrongly), capped by the window's 2 % smallest
+   output steps whatever the estimate (exactly 0 wherever the output rests exactly, as
+   it does noise-free); 0 when the estimate puts fewer than 10 samples there. This
+   scale does not depend on the static and linear blocks' estimates, so a wrong
+   estimate cannot make its own errors look like noise: noise-free, where the output
+   rests, the noise level is 0 and `converged` needs the errors at rounding level.
+
+Otherwise `tracking` (still moving, or its errors above the noise level; one pass:
+the record ended first), `max_iterations` with `passes > 1`, `singular` when fewer
+samples of the window than parameters updated the estimate (the output never left the
+estimate's dead zone), `left_domain`, `diverged`. Thresholds: on correct estimates at
+SNR 25 (Examples 1 and 2, random systems) the settling statistic, the largest of 12
+roughly standard normal ratios, is rarely above 3 and the noise ratio mostly 0.6 to 2;
+noise-free with the defaults, Example 2's seed-0 record, 2.8 off, moved 4.3 standard
+errors over the window and its errors are 10^7 times its noise level's rounding floor.
+The fifth of the spread: a stuck estimate on a random system whose output almost never
+rests makes errors that pass for noise at SNR 3-4 (2 of 200 records, noise-free), which
+no record can tell from real noise; a converged estimate therefore also claims an SNR of
+at least 5. Measured for every estimator in `results/status_honesty.md`.
+
+**Noise-free settings** (`NOISE_FREE`, what `jaxcascade reproduce --snr inf` runs):
+`gradient=True, lam=0.95`. Without noise, the only error left is that of the early
+regressors, built from poor estimates; a constant memory (20 samples) forgets them
+exponentially and the Gauss-Newton gain contracts fast, so the estimate reaches the
+truth to rounding (200 of 200 records of each example, below). Under noise that short
+memory averages over 20 samples only: at SNR 25 the final estimate's error is several
+times the default's (Example 1: 108 of 200 records more than 0.05 off, against 0 with
+the default schedule); the default memory, which grows without bound, averages the
+noise over the whole record but keeps a remnant of the start (noise-free, median
+largest error 5e-4 on Example 1, and `tracking` says so).
+
 **What is measured** (`benchmarks/recursive_noise_free.py`, `recursive_vs_batch.py`).
 The true parameters are an exact fixed point (zero a-priori error at every sample,
 noise-free). Noise-free, one on-line pass from the paper's initial values: with
@@ -94,12 +140,13 @@ back to their initial values.
 
 from __future__ import annotations
 
+import statistics
 from typing import ClassVar, NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float, PRNGKeyArray
+from jaxtyping import Array, Float, Int, PRNGKeyArray
 
 from .._compile import jit
 from .._model import CascadeParams, Orders, is_admissible
@@ -123,10 +170,20 @@ class Recursion(NamedTuple):
       error over the samples after the start.
     - `errors`: `Float[Array, " T"]`, the a-priori prediction error of the corrected
       output, `yc(t) - phi(t) theta_{t-1}` (zero-length unless `errors=True`).
+    - `settling`: the largest change of a regression coefficient over the status's
+      window, in standard errors (`converged` needs at most `settle_tolerance`).
+    - `noise_ratio`: the window's prediction error over the noise level it estimates
+      (`converged` needs at most `noise_tolerance`).
+    - `noise_level`: that noise level (the output noise's standard deviation; 0 where
+      the output rests exactly, as noise-free, or where the estimate puts fewer than 10
+      samples of the window in the backlash's dead zone).
     """
 
     solution: Solution
     errors: Float[Array, " T"]
+    settling: Float[Array, ""]
+    noise_ratio: Float[Array, ""]
+    noise_level: Float[Array, ""]
 
 
 def recursive(
@@ -149,6 +206,9 @@ def recursive(
     passes: int = 1,
     input_range: tuple[float, float] | None = None,
     gradient: bool = False,
+    settle_window: int = 400,
+    settle_tolerance: float = 3.0,
+    noise_tolerance: float = 3.0,
 ) -> Recursion:
     """The recursive least-squares form of the paper's estimator on one record.
 
@@ -184,17 +244,40 @@ def recursive(
       default the record's range (which an on-line user does not know in advance: pass
       the input's nominal range).
 
-    **Status:** `converged` when the final estimate is finite and admissible
-    (`is_admissible` on the input's range), `left_domain` when it is not, `diverged`
-    when it became non-finite or exceeded `divergence_bound` (`_solution.finite`), or
-    when a sample's error was not finite (NaN or inf in the record: the projection
-    skips such a sample, and the status says it happened).
+    - `settle_window`, `settle_tolerance`, `noise_tolerance`: what `converged` means
+      (below).
+
+    **Status** (the module docstring's **What "converged" means**): `converged` when,
+    over the last `settle_window` samples (fewer when the record after the first
+    iteration is shorter), the estimate has settled (every coefficient moved by at most
+    `settle_tolerance` standard errors, from the recursion's `P` and the window's
+    prediction error, plus rounding) and its prediction error is at the noise level it
+    estimates (at most `noise_tolerance` times it, plus rounding, and at most a fifth
+    of the output's spread); `tracking` when either fails (`max_iterations` with
+    `passes > 1`); `singular` when fewer samples of the window than parameters updated
+    the estimate; `left_domain` when the final estimate is not admissible
+    (`is_admissible` on the input's range); `diverged` when it became non-finite or
+    exceeded `divergence_bound` (`_solution.finite`), or when a sample's error was not
+    finite (NaN or inf in the record: the projection skips such a sample, and the
+    status says it happened). `Recursion` carries the figures the status was read
+    from.
     """
     u, y = record(u, y, orders=orders, where="recursive")
     if init is not None and not isinstance(init, CascadeParams):
         raise TypeError(f"recursive: init must be CascadeParams, got {type(init).__name__}.")
     check_settings(
-        lam, memory0, growth, first_samples, anti_windup, delta, every, passes, acceleration
+        lam,
+        memory0,
+        growth,
+        first_samples,
+        anti_windup,
+        delta,
+        every,
+        passes,
+        acceleration,
+        settle_window,
+        settle_tolerance,
+        noise_tolerance,
     )
     if first_samples >= u.shape[0]:
         raise ValueError(
@@ -220,11 +303,25 @@ def recursive(
         project=project,
         passes=passes,
         gradient=gradient,
+        settle_window=settle_window,
+        settle_tolerance=settle_tolerance,
+        noise_tolerance=noise_tolerance,
     )
 
 
 def check_settings(
-    lam, memory0, growth, first_samples, anti_windup, delta, every, passes=1, acceleration=0.0
+    lam,
+    memory0,
+    growth,
+    first_samples,
+    anti_windup,
+    delta,
+    every,
+    passes=1,
+    acceleration=0.0,
+    settle_window=400,
+    settle_tolerance=3.0,
+    noise_tolerance=3.0,
 ):
     """A `ValueError` naming the first bad setting (checked once, before tracing)."""
     if not 0 < lam <= 1:
@@ -249,6 +346,21 @@ def check_settings(
         raise ValueError(f"recursive: every must be a non-negative integer, got {every!r}.")
     if isinstance(passes, bool) or not isinstance(passes, int | np.integer) or passes < 1:
         raise ValueError(f"recursive: passes must be a positive integer, got {passes!r}.")
+    if (
+        isinstance(settle_window, bool)
+        or not isinstance(settle_window, int | np.integer)
+        or settle_window < 2
+    ):
+        raise ValueError(
+            f"recursive: settle_window must be an integer of at least 2 samples, got "
+            f"{settle_window!r}."
+        )
+    for name, value in (
+        ("settle_tolerance", settle_tolerance),
+        ("noise_tolerance", noise_tolerance),
+    ):
+        if not value > 0:
+            raise ValueError(f"recursive: {name} must be positive, got {value}.")
 
 
 def _vector(theta, orders):
@@ -329,6 +441,7 @@ def _multiply_breakpoints(theta, orders):
         "project",
         "passes",
         "gradient",
+        "settle_window",
     )
 )
 def _recursive(
@@ -351,6 +464,9 @@ def _recursive(
     project: bool,
     passes: int,
     gradient: bool = False,
+    settle_window: int = 400,
+    settle_tolerance=3.0,
+    noise_tolerance=3.0,
 ) -> Recursion:
     o = orders
     dtype = u.dtype
@@ -370,6 +486,11 @@ def _recursive(
     first_params = _unit_slopes(init)
     W = window(o)
     b1 = o.g1_columns
+    total = passes * T
+    # the status's window: the last `settle_window` samples (fewer when the record after
+    # the first iteration is shorter)
+    last = max(min(settle_window, total - first_samples), 1)
+    window_start = total - last
     trace_max = jnp.asarray(delta, dtype) * o.size
 
     def model(theta):
@@ -383,13 +504,14 @@ def _recursive(
         return _hold_breakpoints(kept, model(kept), init_theta, init_theta, o, u_min, u_max)[0]
 
     def step(carry, inputs):
-        theta, P1, P2, u_past, y_past, x_past, extra, sq = carry
+        theta, P1, P2, u_past, y_past, x_past, extra, sq, mark = carry
         k, u_t, y_t, valid = inputs  # k: samples since the start, over all passes
         t = k % T
         first = k < first_samples
         switch = (k == first_samples) & (first_samples > 0)
         # (`switch` does not depend on the record: a real branch under `vmap`)
         theta = jax.lax.cond(switch, at_switch, lambda theta: theta, theta)
+        mark = jnp.where(k == window_start, theta, mark)  # the estimate the window starts at
         P2 = jnp.where(switch, delta * jnp.eye(2, dtype=dtype), P2)
         x_past = jnp.where(switch, y_past, x_past)
         # a new pass starts from rest, as the record does
@@ -502,7 +624,14 @@ def _recursive(
         )
         sq = sq + jnp.where(valid & (~first | ~finite_error), counted, 0.0)
         estimate = jnp.where(first, _after_first(theta, init_theta, o), model(theta))
-        return (theta, P1, P2, u_past, y_past, x_past, extra, sq), (estimate, error)
+        # the samples that update the estimate (a regime active) and those the estimate
+        # places in the backlash's dead zone (g1 = g2 = 0: phi = 0, the error is y(t) -
+        # y(t-1)), for the status's window
+        regime = jnp.where(
+            valid & ~first & jnp.isfinite(error), jnp.where(g1 + g2 > 0, _ACTIVE, _DEAD), 0
+        ).astype(jnp.int8)
+        carry = (theta, P1, P2, u_past, y_past, x_past, extra, sq, mark)
+        return carry, (estimate, error, regime)
 
     zeros = jnp.zeros((W - 1,), dtype)
     carry = (
@@ -516,19 +645,18 @@ def _recursive(
         if gradient
         else (),
         jnp.zeros((3,), dtype),
+        _multiply_breakpoints(init_theta, o),
     )
-    total = passes * T
     k = jnp.arange(total)
     u_all, y_all = jnp.tile(u, passes), jnp.tile(y, passes)
     valid = jnp.ones((total,), bool)
     if every == 0:
 
         def plain(carry, inputs):
-            carry, (_, error) = step(carry, inputs)
-            return carry, error if errors else None
+            carry, (_, error, regime) = step(carry, inputs)
+            return carry, (error, regime)
 
-        carry, out = jax.lax.scan(plain, carry, (k, u_all, y_all, valid))
-        error_out = out[-T:] if errors else jnp.zeros((0,), dtype)
+        carry, (error_all, regime_all) = jax.lax.scan(plain, carry, (k, u_all, y_all, valid))
         rows = jnp.zeros((0, o.size), dtype)
     else:
         count = -(-total // every)
@@ -540,19 +668,36 @@ def _recursive(
         inputs = (blocks(k, total), blocks(u_all, 0.0), blocks(y_all, 0.0), blocks(valid, False))
 
         def block(carry, inputs):
-            carry, (estimates, error) = jax.lax.scan(step, carry, inputs)
-            return carry, (estimates[-1], error if errors else None)
+            carry, (estimates, error, regime) = jax.lax.scan(step, carry, inputs)
+            return carry, (estimates[-1], error, regime)
 
-        carry, (rows, out) = jax.lax.scan(block, carry, inputs)
+        carry, (rows, error_all, regime_all) = jax.lax.scan(block, carry, inputs)
         rows = jax.vmap(lambda row: _vector(row, o))(rows)
-        error_out = out.reshape(-1)[:total][-T:] if errors else jnp.zeros((0,), dtype)
+        error_all, regime_all = error_all.reshape(-1)[:total], regime_all.reshape(-1)[:total]
+    error_out = error_all[-T:] if errors else jnp.zeros((0,), dtype)
 
-    theta, sq = carry[0], carry[-1]
+    theta, P1, P2, sq, mark = carry[0], carry[1], carry[2], carry[7], carry[8]
+    P = carry[6][0] if gradient else jax.scipy.linalg.block_diag(P1, P2)
+    check = _settling(
+        theta,
+        mark,
+        P,
+        error_all[window_start:],
+        regime_all[window_start:],
+        # the window's outputs and the one before it (0 at a record's start: from rest)
+        jnp.concatenate([jnp.zeros((1,), dtype), y_all])[window_start:],
+    )
     vector = _vector(model(theta), o)
     history = jnp.concatenate([start[None, :], rows if every else vector[None, :]], axis=0)
     params = CascadeParams.from_vector(vector, o, check=False)
     admissible = is_admissible(params, u_min, u_max)
-    status = jnp.where(admissible, Status.converged, Status.left_domain)
+    settled = (check.settling <= settle_tolerance) & (check.noise_ratio <= noise_tolerance)
+    settled = settled & (check.prediction_error <= check.spread / _MIN_SNR)
+    status = jnp.where(
+        settled, Status.converged, Status.max_iterations if passes > 1 else Status.tracking
+    )
+    status = jnp.where(check.updates >= o.size, status, Status.singular)
+    status = jnp.where(admissible, status, Status.left_domain)
     bounded = jnp.all(jnp.abs(vector) <= divergence_bound) & (sq[2] == 0)
     status = jnp.where(bounded, status, Status.diverged)
     solution = Solution(
@@ -564,7 +709,80 @@ def _recursive(
         cycle_amplitude=jnp.zeros((), dtype),
         path=jnp.asarray(PATH_ONLY, jnp.int32),
     )
-    return Recursion(finite(solution, start), error_out)
+    return Recursion(
+        finite(solution, start),
+        error_out,
+        check.settling,
+        check.noise_ratio,
+        check.noise_level,
+    )
+
+
+# `regime` codes of a sample in the status's window
+_ACTIVE = 1  # g1 or g2 active: the sample updates the estimate
+_DEAD = 2  # g1 = g2 = 0: phi = 0 and the error is the output's own step y(t) - y(t-1)
+# fewer samples than this in the estimate's dead zone estimate no noise level
+_MIN_DEAD = 10
+# the fraction of the window's smallest output steps taken as the output at rest
+_RESTING = 0.02
+# the largest prediction error a converged estimate may have, as a fraction of the
+# output's spread (an estimated SNR of 5): a stuck estimate on a system whose output
+# never rests makes errors that look like noise at SNR 3-4 (2 of 200 random systems,
+# noise-free), and no record can tell those from noise
+_MIN_SNR = 5.0
+
+
+class _Check(NamedTuple):
+    settling: Float[Array, ""]
+    noise_ratio: Float[Array, ""]
+    noise_level: Float[Array, ""]
+    prediction_error: Float[Array, ""]
+    spread: Float[Array, ""]
+    updates: Int[Array, ""]
+
+
+def _step_quantile(q: float) -> float:
+    """The q-quantile of |e(t) - e(t-1)|, e white Gaussian noise of unit variance."""
+    return statistics.NormalDist().inv_cdf((1.0 + q) / 2.0) * 2**0.5
+
+
+def _settling(theta, mark, P, errors, regime, y) -> _Check:
+    """What the status says of the last window (module docstring, **Status**): `theta`
+    and `mark` the regression's coefficients at its end and start, `P` the recursion's
+    covariance at its end, `errors` and `regime` the a-priori errors and regimes of its
+    samples, `y` its outputs with the one before it."""
+    dtype = theta.dtype
+    # rounding: noise-free, the errors and the steps end at this relative size
+    tol = jnp.sqrt(jnp.finfo(dtype).eps)
+    active, dead = regime == _ACTIVE, regime == _DEAD
+    n_active, n_dead = jnp.sum(active), jnp.sum(dead)
+    # settled: the change over the window against the standard errors at its end
+    s2 = jnp.sum(jnp.where(active, errors**2, 0.0)) / jnp.maximum(n_active, 1)
+    se = jnp.sqrt(s2 * jnp.abs(jnp.diag(P)))
+    change = jnp.abs(theta - mark)
+    settling = jnp.max(change / (se + tol * (1.0 + jnp.abs(theta))))
+    # the noise level: where the estimate puts the backlash at rest the error is the
+    # output's step, e(t) - e(t-1) if it does rest (lower quartile: robust to samples
+    # put there wrongly); and the output's smallest steps, whatever the estimate
+    # (exactly 0 noise-free wherever the output rests)
+    steps = jnp.sort(jnp.where(dead, jnp.abs(errors), jnp.inf))
+    at_rest = steps[jnp.maximum(n_dead - 1, 0) // 4] / _step_quantile(0.25)
+    n = y.shape[0] - 1
+    k = max(int(_RESTING * n), 1)
+    smallest = jnp.sort(jnp.abs(jnp.diff(y)))[k - 1] / _step_quantile((k - 0.5) / n)
+    noise_level = jnp.where(n_dead >= _MIN_DEAD, jnp.minimum(at_rest, smallest), 0.0)
+    # the prediction error: RMS over the window, a step (two noise samples) counted half
+    normalised = jnp.where(active, errors**2, jnp.where(dead, 0.5 * errors**2, 0.0))
+    prediction_error = jnp.sqrt(jnp.sum(normalised) / jnp.maximum(n_active + n_dead, 1))
+    scale = jnp.sqrt(jnp.mean(y[1:] ** 2))
+    return _Check(
+        settling=settling,
+        noise_ratio=prediction_error / (noise_level + tol * scale),
+        noise_level=noise_level,
+        prediction_error=prediction_error,
+        spread=jnp.std(y[1:]),
+        updates=n_active,
+    )
 
 
 def _unit_slopes(params: CascadeParams) -> CascadeParams:
@@ -574,6 +792,9 @@ def _unit_slopes(params: CascadeParams) -> CascadeParams:
     vector = vector.at[s["MR"]].set(1.0).at[s["ML"]].set(1.0)
     return CascadeParams.from_vector(vector, params.orders, check=False)
 
+
+# The settings for a noise-free record (module docstring, **Noise-free settings**).
+NOISE_FREE = {"gradient": True, "lam": 0.95}
 
 # `recursive`'s settings and their defaults: the one place they are written down.
 _RECURSIVE = keyword_defaults(recursive)
@@ -589,6 +810,8 @@ class Recursive(Estimator):
     summary: ClassVar[str] = (
         "the key-term regression (eqs. 16-18) by recursive least squares with forgetting"
     )
+    # the settings `jaxcascade reproduce --snr inf` uses (module docstring)
+    noise_free: ClassVar[dict] = NOISE_FREE
 
     lam: float = setting(_RECURSIVE["lam"])
     memory0: float = setting(_RECURSIVE["memory0"])
@@ -602,6 +825,9 @@ class Recursive(Estimator):
     passes: int = setting(_RECURSIVE["passes"])
     gradient: bool = setting(_RECURSIVE["gradient"])
     every: int = setting(_RECURSIVE["every"])
+    settle_window: int = setting(_RECURSIVE["settle_window"])
+    settle_tolerance: float = setting(_RECURSIVE["settle_tolerance"])
+    noise_tolerance: float = setting(_RECURSIVE["noise_tolerance"])
 
     def __check_init__(self):
         check_settings(
@@ -614,6 +840,9 @@ class Recursive(Estimator):
             self.every,
             self.passes,
             self.acceleration,
+            self.settle_window,
+            self.settle_tolerance,
+            self.noise_tolerance,
         )
 
     def __call__(
@@ -650,4 +879,7 @@ class Recursive(Estimator):
             gradient=self.gradient,
             every=self.every,
             input_range=input_range,
+            settle_window=self.settle_window,
+            settle_tolerance=self.settle_tolerance,
+            noise_tolerance=self.noise_tolerance,
         ).solution
