@@ -146,6 +146,27 @@ def breakpoint_bounds(us) -> np.ndarray:
     return np.array([low if low < 0 else u[0], high if high > 0 else u[-1]])
 
 
+def tame_edges(params: CascadeParams, bounds) -> tuple[CascadeParams, list[str]]:
+    """`params` with every breakpoint outside `bounds` (`breakpoint_bounds`: too few
+    input samples beyond it to determine the segment there) moved just inside and its
+    slope change set to zero, so that the segment starts as its neighbour's
+    continuation; and the names of the breakpoints moved."""
+    values = params.to_dict()
+    o = params.orders
+    moved = []
+    for side, n, limit in (("R", o.nR, float(bounds[1])), ("L", o.nL, float(bounds[0]))):
+        outer = [i for i in range(1, n) if abs(values[f"D{side}{i}"]) >= abs(limit)]
+        for rank, i in enumerate(outer):
+            # spread inside the bound, in order, the outermost nearest it
+            values[f"D{side}{i}"] = limit * (1 - 0.01 * (len(outer) - rank))
+            values[f"M{side}{i + 1}"] = 0.0
+            moved.append(f"D{side}{i}")
+    if not moved:
+        return params, moved
+    vector = jnp.asarray([values[name] for name in o.names], params.mR.dtype)
+    return CascadeParams.from_vector(vector, o, check=False), moved
+
+
 @eqx.filter_jit
 def _refit(
     vectors,
@@ -559,7 +580,16 @@ def model_error_loop(
         fitted = estimator(jnp.concatenate(us), jnp.concatenate(ys), orders, key=key)
         base = jax.device_get(fitted.params)
         bound()  # the robust estimator's program is the largest of the loop: past the bound
-        if len(us) > 1:
+        # A breakpoint among the input's last few samples fits a segment on them alone
+        # (a slope change of 15 on Silverbox's 10 largest inputs): moved inside, and the
+        # cascade refined from there.
+        base, moved = tame_edges(base, breakpoint_bounds(us))
+        if moved:
+            say(
+                f"breakpoint(s) {', '.join(moved)} had fewer than {MIN_BEYOND} input samples "
+                "(or 1 %) beyond them: moved inside, segment refitted"
+            )
+        if len(us) > 1 or moved:
             say("refining it on every estimation record")
             base = refit(plain(base), _no_effect(base), us, ys)[0].params
     model = plain(base)
