@@ -110,7 +110,7 @@ regressors, built from poor estimates; a constant memory (20 samples) forgets th
 exponentially and the Gauss-Newton gain contracts fast, so the estimate reaches the
 truth to rounding (200 of 200 records of each example, below). Under noise that short
 memory averages over 20 samples only: at SNR 25 the final estimate's error is several
-times the default's (Example 1: 108 of 200 records more than 0.05 off, against 0 with
+times the default's (Example 1: 108 of 200 records more than 0.05 off, against 1 with
 the default schedule); the default memory, which grows without bound, averages the
 noise over the whole record but keeps a remnant of the start (noise-free, median
 largest error 5e-4 on Example 1, and `tracking` says so).
