@@ -161,7 +161,7 @@ ERRORS = {
     "unknown format": (
         lambda p: _write(_frame(), p / "record.csv").rename(p / "record.xlsx") or p / "record.xlsx",
         {},
-        r"Unknown data format '\.xlsx'.*use a \.csv or \.parquet file",
+        r"Unknown data format '\.xlsx'.*use a \.csv, \.tsv, \.txt, \.parquet or \.mat file",
     ),
     "missing columns": (
         lambda p: _csv(p, _frame()),

@@ -33,11 +33,56 @@ class Parser(argparse.ArgumentParser):
         raise CLIError(f"{message} (see '{self.prog} --help')")
 
 
-def add_record_arguments(parser, *, scaling: str, required: bool = True) -> None:
-    """Options shared by the commands that read a measured record (`fit`, `loop`)."""
-    parser.add_argument("--input", required=required, help="input column")
-    parser.add_argument("--output", required=required, help="output column")
-    parser.add_argument("--time", default=None, help="optional time column")
+# The record spec, documented once: the help of every positional or option that names a
+# record file (fit's DATA, loop's TRAIN, --validate, --test) ends with it.
+RECORD_SPEC = (
+    "FILE[:INPUT,OUTPUT[:START:STOP]]: FILE a .csv, .tsv or .txt (delimiter, decimal comma "
+    "and a missing header detected), .parquet or .mat file (v4 to v7.3); INPUT,OUTPUT its "
+    "signals (header names, 0-based column indices or MAT variables, row or column "
+    "vectors), which override --input/--output; START:STOP the samples of the file as "
+    "stored (0-based, before decimation, a Python slice, either may be empty), e.g. "
+    "DATAUNIF.MAT:u12,z12:0:300 or DATAUNIF.MAT:u11,z11::300; a path that exists as given "
+    "is a file even if it holds ':'"
+)
+
+
+def add_record_arguments(parser, *, scaling: str, required: bool = False) -> None:
+    """Options shared by the commands that read a measured record (`fit`, `loop`); their
+    records are record specs (`RECORD_SPEC`), read by `read_record(spec,
+    **record_options(args))`."""
+    parser.add_argument(
+        "--input",
+        required=required,
+        help="input signal: a column name, a 0-based column index or a MAT variable "
+        "(needed unless every record spec names its signals)",
+    )
+    parser.add_argument(
+        "--output",
+        required=required,
+        help="output signal, as --input",
+    )
+    parser.add_argument("--time", default=None, help="optional time column (or MAT variable)")
+    parser.add_argument(
+        "--ts",
+        type=float,
+        default=None,
+        metavar="SECONDS",
+        help="sample period of records without a time column (with one, they must agree "
+        "within 1 %%); records of one command must share their period",
+    )
+    parser.add_argument(
+        "--units",
+        default=None,
+        metavar="INPUT_UNIT,OUTPUT_UNIT",
+        help="physical units of input and output, kept with the record (e.g. V,mm)",
+    )
+    parser.add_argument(
+        "--detrend",
+        default="none",
+        choices=("none", "mean", "linear"),
+        help="remove the mean or the least-squares line from input and output of every "
+        "record, as MATLAB's detrend, before decimation and scaling (default none)",
+    )
     parser.add_argument(
         "--orders",
         default="2,2,2,2",
@@ -53,6 +98,27 @@ def add_record_arguments(parser, *, scaling: str, required: bool = True) -> None
         "(centre and scale), auto (scale, or standard when the input has fewer than 5 %% of "
         "its samples on one side of zero); estimates are also mapped back "
         f"(default {scaling})",
+    )
+
+
+def record_options(args) -> dict:
+    """`read_record`'s settings from the record options (`add_record_arguments`)."""
+    units = [None, None]
+    if args.units is not None:
+        units = [part.strip() or None for part in args.units.split(",")]
+        if len(units) != 2:
+            raise CLIError(f"--units takes INPUT_UNIT,OUTPUT_UNIT, got {args.units!r}.")
+    if args.ts is not None and not (math.isfinite(args.ts) and args.ts > 0):
+        raise CLIError(f"--ts must be a positive number of seconds, got {args.ts}.")
+    return dict(
+        input_column=args.input,
+        output_column=args.output,
+        time_column=args.time,
+        sample_period=args.ts,
+        input_unit=units[0],
+        output_unit=units[1],
+        detrend=args.detrend,
+        decimate=args.decimate,
     )
 
 

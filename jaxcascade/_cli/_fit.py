@@ -12,11 +12,13 @@ from __future__ import annotations
 import math
 
 from ._common import (
+    RECORD_SPEC,
     CLIError,
     add_record_arguments,
     estimator_help,
     examples,
     parse_orders,
+    record_options,
     strict_json,
 )
 
@@ -67,15 +69,7 @@ def run_fit(args) -> int:
     if args.decimate < 1:
         raise CLIError(f"--decimate must be an integer >= 1, got {args.decimate}.")
     estimator(args.estimator)  # unknown names fail here, before reading data
-    record = read_record(
-        args.data,
-        args.input,
-        args.output,
-        time_column=args.time,
-        decimate=args.decimate,
-        scaling=args.scaling,
-        orders=orders,
-    )
+    record = read_record(args.data, **record_options(args), scaling=args.scaling, orders=orders)
     solution, error, errors = fit_record(record.u, record.y, orders, args.estimator)
     status = Status(int(solution.status))
     estimates = solution.params.to_dict()
@@ -133,7 +127,7 @@ def _are(names) -> str:
 def add_parser(subparsers) -> None:
     parser = subparsers.add_parser(
         "fit",
-        help="fit the cascade to a CSV or Parquet record",
+        help="fit the cascade to a measured record (CSV, TSV, Parquet or MAT)",
         description=(
             "Fit the cascade to one record and print the estimates, the status and the "
             "free-run NRMSE. Exit code 0 when the status is usable (converged, cycled), "
@@ -144,9 +138,10 @@ def add_parser(subparsers) -> None:
             "jaxcascade fit record.csv --input u --output y",
             "jaxcascade fit record.parquet --input u --output y --orders 3,2,2,1 "
             "--estimator literal --json",
+            "jaxcascade fit DATAUNIF.MAT:u11,z11:0:400 --ts 0.02 --units V,V --detrend mean",
         ),
     )
-    parser.add_argument("data", help="CSV or Parquet file")
+    parser.add_argument("data", metavar="DATA", help=f"the record, {RECORD_SPEC}")
     add_record_arguments(parser, scaling="none")
     parser.add_argument(
         "--estimator",

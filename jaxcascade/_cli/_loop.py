@@ -14,6 +14,7 @@ import sys
 
 from .._names import EFFECTS, NOISE_MODEL
 from ._common import (
+    RECORD_SPEC,
     CLIError,
     add_record_arguments,
     examples,
@@ -520,19 +521,22 @@ def _benchmark_summary(bench, scores, scaling, args) -> dict:
 
 
 def _file_records(args, orders):
-    """Estimation, validation and test records read from the files on the command line,
-    all in the estimation records' scaling."""
+    """Estimation, validation and test records read from the record specs on the command
+    line (`RECORD_SPEC`), all in the estimation records' scaling, of one sample period."""
     import numpy as np
 
-    from .._data import Scaling, read_record
+    from .._data import Scaling, check_sample_periods, parse_record_spec, read_record
+    from ._common import record_options
 
+    specs = [*args.train, *([args.validate] if args.validate else []), *(args.test or [])]
+    named = bool(specs) and all(parse_record_spec(spec).input is not None for spec in specs)
     missing = [
         option
         for option, value in (
             ("TRAIN", args.train),
             ("--validate", args.validate),
-            ("--input", args.input),
-            ("--output", args.output),
+            ("--input", args.input or named),
+            ("--output", args.output or named),
         )
         if not value
     ]
@@ -543,10 +547,8 @@ def _file_records(args, orders):
         )
     # Lengths are checked by the loop: the estimation records together, a scored record
     # against its initialisation window.
-    options = dict(time_column=args.time, decimate=args.decimate)
-    raw = [
-        read_record(path, args.input, args.output, scaling="none", **options) for path in args.train
-    ]
+    options = record_options(args)
+    raw = [read_record(spec, **options, scaling="none") for spec in args.train]
     scaling = Scaling.from_data(
         np.concatenate([r.u for r in raw]), np.concatenate([r.y for r in raw]), args.scaling
     )
@@ -556,11 +558,9 @@ def _file_records(args, orders):
         )
         for r in raw
     ]
-    validation = read_record(args.validate, args.input, args.output, scaling=scaling, **options)
-    tests = [
-        read_record(path, args.input, args.output, scaling=scaling, **options)
-        for path in args.test or []
-    ]
+    validation = read_record(args.validate, **options, scaling=scaling)
+    tests = [read_record(spec, **options, scaling=scaling) for spec in args.test or []]
+    check_sample_periods([*training, validation, *tests])
     return training, validation, tests
 
 
@@ -713,9 +713,14 @@ def add_parser(subparsers) -> None:
         ),
     )
     parser.add_argument(
-        "train", nargs="*", help="estimation record(s) (CSV or Parquet), estimated jointly"
+        "train",
+        nargs="*",
+        metavar="TRAIN",
+        help=f"estimation record(s), estimated jointly; each a record spec, {RECORD_SPEC}",
     )
-    parser.add_argument("--validate", default=None, help="validation record (required with TRAIN)")
+    parser.add_argument(
+        "--validate", default=None, help="validation record spec, as TRAIN (required with TRAIN)"
+    )
     parser.add_argument(
         "--benchmark",
         default=None,
@@ -761,10 +766,10 @@ def add_parser(subparsers) -> None:
         "--test",
         nargs="+",
         default=None,
-        metavar="FILE",
-        help="test record(s): scored with the final model only, used neither for fitting nor "
-        "for choosing candidates (the only out-of-sample figures when the validation record "
-        "chose the model)",
+        metavar="SPEC",
+        help="test record spec(s), as TRAIN: scored with the final model only, used neither "
+        "for fitting nor for choosing candidates (the only out-of-sample figures when the "
+        "validation record chose the model)",
     )
     parser.add_argument(
         "--test-window",
