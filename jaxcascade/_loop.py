@@ -369,10 +369,24 @@ def evaluate(
     residual = y[n:] - scored
     innovations = innovations_np(model.noise, residual)
     error = score(y[n:], scored)
-    tests = residual_tests(u[n:], innovations, regime[n:], sample_period=sample_period)
+    tests = residual_tests(
+        u[n:], innovations, regime[n:], sample_period=sample_period, **test_sizes(len(residual))
+    )
     window_error = None if window is None else score(y[slice(*window)], window_sim)
     prediction_error = score(y[n:], y[n:] - innovations)
     return Evaluation(residual, y_sim, error, tests, window_error, innovations, prediction_error)
+
+
+def test_sizes(n: int) -> dict:
+    """The residual tests' lags, input-level bins and time blocks for `n` scored samples:
+    20 lags and 10 bins and blocks (`residual_tests`' defaults) from 80 samples on, fewer
+    on a shorter record (a quarter of it in lags, half in bins and blocks), so that a
+    benchmark's short test record is still diagnosed; `ResidualTests.max_lag` says which."""
+    return {
+        "max_lag": int(max(1, min(20, n // 4))),
+        "n_bins": int(max(2, min(10, n // 2))),
+        "n_blocks": int(max(2, min(10, n // 2))),
+    }
 
 
 def innovations_np(noise: ARNoise, residual) -> np.ndarray:

@@ -119,10 +119,20 @@ def _markdown(report: dict, command: str) -> str:
             f"{c['bandwidth']} | "
             f"{c['p_value']:.2g} | {c['significant']} | {c['signature_match']} |"
         )
+    lags = report["residual_tests"]["before"].get("max_lag")
     lines += [
         "",
         "## Residual tests (p-values; pass at p >= 0.05)",
         "",
+        *(
+            [
+                f"The validation record is short: the correlation tests look at {lags} lags "
+                "(20 from 80 scored samples on), the level and time tests at fewer groups.",
+                "",
+            ]
+            if lags is not None and lags < 20
+            else []
+        ),
         "| test | before | after |",
         "|---|---|---|",
     ]
@@ -184,20 +194,21 @@ def _p(test) -> str:
     return f"{p:.3g} {mark}" if p is not None else mark
 
 
-def _window(text, decimate: int, length: int, option: str = "--window"):
+def _window(text, decimate: int, length: int, option: str = "--window", offset: int = 0):
     """`--window START:STOP` (samples of the stored file) in samples of the decimated
-    record, or None."""
+    record, or None. `offset`: the file sample the record starts at (a ranged record
+    spec, `Record.file_start`)."""
     if text is None:
         return None
     try:
-        start, stop = (int(part) for part in text.split(":"))
+        start, stop = (int(part) - offset for part in text.split(":"))
     except ValueError:
         raise CLIError(f"{option} takes START:STOP in samples, got {text!r}.") from None
     first, last = start // decimate, -(-stop // decimate)
     if not 0 <= start < stop or last > length:
         raise CLIError(
-            f"{option} {text}: needs 0 <= START < STOP within the scored record "
-            f"({length * decimate} samples as stored)."
+            f"{option} {text}: needs START < STOP within the scored record (file samples "
+            f"{offset} to {offset + length * decimate} as stored)."
         )
     if last - first < 2:
         raise CLIError(f"{option} {text}: fewer than 2 samples after decimation by {decimate}.")
@@ -214,7 +225,7 @@ def _windows(texts, decimate: int, records) -> list:
             f"got {len(texts)}."
         )
     return [
-        _window(text, decimate, len(r), "--test-window")
+        _window(text, decimate, len(r), "--test-window", offset=r.file_start)
         for text, r in zip(texts, records, strict=True)
     ]
 
@@ -252,7 +263,7 @@ def run_loop(args) -> int:
     else:
         training, validation, tests = _file_records(args, orders)
         bench = None
-        window = _window(args.window, args.decimate, len(validation))
+        window = _window(args.window, args.decimate, len(validation), offset=validation.file_start)
         test_windows = _windows(args.test_window, args.decimate, tests)
     if args.init_samples is None:
         # the benchmark's own window (in samples after decimation), else 50
@@ -647,8 +658,8 @@ def benchmark_split(records, max_samples: int) -> dict:
 
 
 def _name(record) -> str:
-    if record.source and not pathlib.Path(record.source).exists():
-        return record.source  # a benchmark's record: its name
+    """A record's name in reports: its file's name with the spec's signals and range
+    (`DATAUNIF.MAT:u11,z11:0:300`), a benchmark's record name, or "arrays"."""
     return pathlib.Path(record.source).name if record.source else "arrays"
 
 
