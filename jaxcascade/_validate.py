@@ -13,6 +13,8 @@ estimators report it through a status instead, `_estimator._solution.finite`).
 
 from __future__ import annotations
 
+import warnings
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -87,6 +89,14 @@ def _array(value, name: str, where: str, cast: bool):
     target = jnp.result_type(float) if cast or not np.issubdtype(dtype, np.floating) else dtype
     if is_traced(value):
         return value.astype(target)
+    if dtype == np.float64 and np.dtype(target) == np.float32:
+        warnings.warn(
+            f"{where}: {name} is float64 but JAX's float64 is off, so it is computed in "
+            "float32 (about 7 significant digits); enable float64 first with "
+            "jax.config.update('jax_enable_x64', True).",
+            UserWarning,
+            stacklevel=4,
+        )
     host = np.asarray(value)
     finite = np.isfinite(host)
     if not finite.all():

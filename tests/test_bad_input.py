@@ -473,3 +473,22 @@ def test_help_lists_every_public_function_and_class():
     missing = [n for n in public if f"`{n}`" not in jc.__doc__ and f"`{n}(" not in jc.__doc__]
     assert not missing, missing
     assert jc.__doc__.strip().splitlines()[0] in text
+
+
+def test_float64_data_with_float64_off_is_one_warning():
+    """A float64 record computed in float32 without a word loses digits silently: the
+    checks warn once, naming the switch (the package never flips it itself)."""
+    import subprocess
+    import sys
+
+    code = (
+        "import warnings, numpy as np, jaxcascade as jc\n"
+        "u = np.linspace(-1, 1, 200)\n"
+        "with warnings.catch_warnings(record=True) as caught:\n"
+        "    warnings.simplefilter('always')\n"
+        "    jc.simulate(jc.example(1).params(), u)\n"
+        "print([str(w.message) for w in caught])\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert "jax_enable_x64" in out.stdout and "float32" in out.stdout
