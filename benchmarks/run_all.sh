@@ -114,9 +114,12 @@ nonlinear() {  # issue 32: the loop on the community's nonlinear benchmarks (rea
     python benchmarks/nonlinear_benchmarks.py --data "${NLB_DATA:-../shared/data/nonlinear_benchmarks}" \
         --out results/nonlinear_benchmarks
 }
+statuses() {  # issue 35: every estimator's statuses against the truth
+    python benchmarks/status_honesty.py --realisations 100 --seed 0
+}
 
 all=(bench profile bench_robust distributed robust sweeps literal efficiency loop stability backlash
-    reproduce recursive inputs noise nonlinear)
+    reproduce recursive inputs noise nonlinear statuses)
 steps=("$@")
 if [ "${steps[*]}" = list ]; then
     for step in "${all[@]}"; do declare -f "$step"; done
