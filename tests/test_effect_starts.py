@@ -62,7 +62,7 @@ def _model(u, y):
 
 @pytest.mark.parametrize("name", sorted(EFFECTS))
 @settings(
-    max_examples=6,
+    max_examples=3,
     deadline=None,
     derandomize=True,
     suppress_health_check=[HealthCheck.too_slow],
