@@ -7,8 +7,9 @@ Example 1, input uniform in (-2, 2), output noise at SNR 25; at sample 4000 one
 parameter steps: `cR` 0.3 -> 0.45 (the backlash's right gap widens, as in a wearing
 drive train) and, separately, `b1` -0.2 -> -0.35 (a step of the same size in the linear
 block; the block stays stable), and both gaps at once, `cL` 0.2 -> 0.3 with `cR` 0.3 ->
-0.45 (the backlash widens on both sides; `[system.change]` with lists). One on-line pass of `Recursive` per realisation with a
-constant forgetting factor after its start: `lam_k = min(lam, 1 - 1/(10 + 0.1 k + 3e-4 k^2))`
+0.45 (the backlash widens on both sides; `[system.change]` with lists). One on-line pass
+of `Recursive` per realisation with a constant forgetting factor after its start:
+`lam_k = min(lam, 1 - 1/(10 + 0.1 k + 3e-4 k^2))`
 (`_online.forgetting`), lam in {0.99, 0.995, 0.999}, the estimate kept every `--every`
 samples (`_montecarlo._tracking`). Per change x lam: the fraction within 0.05 of the
 truth just before the change, the fraction that re-enters (every parameter back within
