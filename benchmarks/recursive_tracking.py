@@ -37,6 +37,8 @@ def _label(parameter, to) -> tuple[str, str]:
     if isinstance(parameter, tuple):
         return "+".join(parameter), "/".join(f"{v:g}" for v in to)
     return parameter, f"{to:g}"
+
+
 AT = 4000
 
 
