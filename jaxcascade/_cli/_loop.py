@@ -484,16 +484,11 @@ def _benchmark_summary(bench, scores, scaling, args) -> dict:
         row = {
             s.model: s
             for s in scores
-            if s.role == "test"
-            and s.record.startswith(bench.name)
-            and s.record == f"{bench.name} {record.name}"
+            if s.role == "test" and s.record == f"{bench.name} {record.name}"
         }
         final, declared, arx = row["final model"], row["declared cascade"], row["linear ARX"]
         published = dict(bench.published.get(record.name, {}))
-        best_linear = min(
-            (v for k, v in published.items() if k in ("linear_state_space", "linear_arx")),
-            default=None,
-        )
+        best_linear = bench.best_linear(record.name)
         tests.append(
             {
                 "record": record.name,
