@@ -26,13 +26,14 @@ import datetime
 import json
 import os
 import pathlib
-import platform
 import subprocess
 import sys
 
 sys.path.insert(0, str(pathlib.Path(__file__).parent))
 
 from brfd import run_loop  # noqa: E402
+
+from jaxcascade._benchmark._timing import device_description  # noqa: E402
 
 NAMES = ("CED", "EMPS", "Silverbox")
 # Why the model class cannot follow a benchmark, where the final model misses the linear
@@ -75,7 +76,7 @@ def main(argv=None) -> int:
         resources = {
             **measured,
             "command": "jaxcascade " + " ".join(loop),
-            "machine": _machine(),
+            "machine": device_description(),
             "load_before": os.getloadavg()[0],
             "date": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
             "commit": _commit(),
@@ -86,18 +87,6 @@ def main(argv=None) -> int:
         write_summary(out)
     write_summary(out)
     return 0
-
-
-def _machine() -> str:
-    model = ""
-    try:
-        for line in pathlib.Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                model = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    return f"{model or platform.processor()}, {os.cpu_count()} cores"
 
 
 def _commit() -> str:
