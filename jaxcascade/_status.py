@@ -19,8 +19,12 @@ class Status(enum.IntEnum):
       less than the output's mean does (robust).
     - `tracking`: an on-line estimate (recursive) that had not settled at the noise level
       when the record ended; it follows the data but is not yet an estimate of a fixed
-      system, so it counts as a failure. (Codes never change: a new status gets the next
-      number.)
+      system, so it counts as a failure.
+    - `local_minimum`, `on_edge`: an output-error fit (robust, pem, a host function)
+      that settled where the data do not say it is their estimate: its residual is not
+      measurement noise, or a breakpoint sits on the edge of the input's range
+      (`_estimator._basin.claim`). Failures. (Codes never change: a new status gets the
+      next number.)
     """
 
     converged = 0
@@ -32,6 +36,8 @@ class Status(enum.IntEnum):
     cycled = 6
     no_improvement = 7
     tracking = 8
+    local_minimum = 9
+    on_edge = 10
 
     @property
     def message(self) -> str:
@@ -68,6 +74,17 @@ _MESSAGES = {
         "window it still moved by more than its standard errors allow, or its prediction "
         "error stayed above the noise level it estimates (0 where the output rests "
         "exactly, as noise-free) or above a fifth of the output's spread"
+    ),
+    Status.local_minimum: (
+        "the fit settled, but its simulation error (whitened by an AR model) is not "
+        "measurement noise: correlated with itself, with the input or with products of "
+        "the two (Billings and Voon's tests), after every start and retry; a local "
+        "minimum of the cost or a record the model cannot describe"
+    ),
+    Status.on_edge: (
+        "the fit settled with a breakpoint on the edge of the input's range (within 1 % "
+        "of its half-range from 0 or from the end): the segment beyond holds almost no "
+        "samples, so the data do not determine its slope"
     ),
     Status.cycled: (
         "the paper's iteration settled into a short cycle between neighbouring estimates "

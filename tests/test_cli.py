@@ -123,8 +123,10 @@ def test_fit_says_which_parameters_the_record_does_not_determine(capsys, tmp_pat
     path = tmp_path / "record.csv"
     pd.DataFrame({"u": np.asarray(u), "y": np.asarray(y)}).to_csv(path, index=False)
     argv = ["fit", str(path), "--input", "u", "--output", "y"]
-    assert main([*argv, "--json"]) == 0  # the status is usable: the others stand
+    # `on_edge` (DL1 at the end of the range), the parameters named, the others stand
+    assert main([*argv, "--json"]) == 0
     result = json.loads(capsys.readouterr().out)
+    assert result["status"] == "on_edge"
     unknown = set(result["not_identifiable"])
     assert {"DR1", "DL1"} <= unknown <= {"DR1", "MR2", "DL1", "ML2"}
     assert "not identifiable from this record" in result["message"]

@@ -165,7 +165,9 @@ def test_prediction_error_refinement_fits_the_cascade_and_the_noise_model():
         cycle_amplitude=jnp.zeros(()),
         path=jnp.ones((), jnp.int32),
     )
-    refine = jax.jit(lambda start, u, y: _refine(start, u, y, EX.orders, 4, "bic", 50, 1e-6, 1e-9))
+    refine = jax.jit(
+        lambda start, u, y: _refine(start, u, y, EX.orders, 4, "bic", 50, 1e-6, 1e-9, 5.0)
+    )
     _check_fit(refine(start, jnp.asarray(u), jnp.asarray(y)), u, y)
 
 

@@ -42,10 +42,12 @@ def largest_error(solution, ex):
 
 def test_the_new_status_keeps_every_code():
     # codes are stored in result tables as numbers: a new status only appends
-    assert [s.value for s in Status] == list(range(9))
+    assert [s.value for s in Status] == list(range(11))
     assert Status.tracking == 8 and Status.no_improvement == 7 and Status.converged == 0
+    assert Status.local_minimum == 9 and Status.on_edge == 10
     assert Status.tracking.failure and "noise level" in Status.tracking.message
-    assert list(status_names([0, 8, 9])) == ["converged", "tracking", "unknown"]
+    assert Status.local_minimum.failure and Status.on_edge.failure
+    assert list(status_names([0, 8, 10, 11])) == ["converged", "tracking", "on_edge", "unknown"]
 
 
 @pytest.mark.parametrize("number", [1, 2])
@@ -112,3 +114,109 @@ def test_the_thresholds_are_settings_and_decide():
     for bad in ({"settle_window": 1}, {"settle_tolerance": 0.0}, {"noise_tolerance": -1.0}):
         with pytest.raises(ValueError, match=next(iter(bad))):
             estimator("recursive", **bad)
+
+
+# ---- output-error fits: the data's word (`_basin.claim`) -------------------------------
+
+
+def _numpy_validity(xi, u, lags=10):
+    """Billings and Voon's five tests in plain NumPy (an independent reference)."""
+    n = len(xi)
+
+    def rho(a, b, first):
+        a, b = a - a.mean(), b - b.mean()
+        scale = np.sqrt((a @ a) * (b @ b))
+        return np.array([a[k:] @ b[: n - k] for k in range(first, first + lags)]) / scale
+
+    xi = xi - xi.mean()
+    u2 = u**2 - np.mean(u**2)
+    pairs = [(xi, xi, 1), (xi, u, 0), (xi, xi * u, 1), (xi, u2, 0), (xi**2 - np.mean(xi**2), u2, 0)]
+    return max((n * np.sum(rho(a, b, f) ** 2) - lags) / np.sqrt(2 * lags) for a, b, f in pairs)
+
+
+def _ar(pole):
+    from jaxcascade._disturbance import disturbance
+
+    return disturbance("ar", poles=(pole,))
+
+
+def _ar_noise(key, n, pole):
+    return _ar(pole)(key, n, jnp.float64)
+
+
+def test_validity_statistic_matches_numpy_and_ignores_the_noise_colour():
+    from jaxcascade._estimator._basin import validity_statistic, whitened
+
+    key_u, key_e = jax.random.split(jax.random.PRNGKey(11))
+    u = uniform_input(key_u, 2000, 2.0)
+    e = jax.random.normal(key_e, (2000,))
+    np.testing.assert_allclose(
+        float(validity_statistic(e, u)), _numpy_validity(np.asarray(e), np.asarray(u)), rtol=1e-9
+    )
+    # noise independent of a white input passes, white or AR(1) with pole 0.9 once
+    # whitened (each test about standard normal: bound 5 is P ~ 4e-4 per test)
+    for k in jax.random.split(key_e, 6):
+        assert float(validity_statistic(jax.random.normal(k, (2000,)), u)) < 5.0
+        assert float(validity_statistic(whitened(_ar_noise(k, 2000, 0.9)), u)) < 5.0
+    # coloured and not whitened, it fails: the tests are not blind
+    assert float(validity_statistic(_ar_noise(key_e, 2000, 0.9), u)) > 5.0
+
+
+@pytest.mark.parametrize("noise", ["none", "white", "ar0.9"])
+def test_claim_refuses_a_wrong_backlash_and_keeps_the_truth(noise):
+    # Example 1's record under three noises: the truth keeps `converged`; the truth with
+    # the backlash's right gap 0.1 too wide (a model error of about a tenth of the noise
+    # at SNR 25 in NRMSE) becomes `local_minimum`; a breakpoint moved onto the end of
+    # the input's range, `on_edge`; a failed status stays what it was
+    from jaxcascade._estimator._basin import claim
+    from jaxcascade._model import CascadeParams
+    from jaxcascade._simulate import add_noise, simulate
+
+    ex = example(1)
+    key_u, key_e = jax.random.split(jax.random.PRNGKey(5))
+    u = uniform_input(key_u, ex.n_samples, ex.amplitude)
+    y0 = simulate(ex.params(), u)
+    snr = jnp.inf if noise == "none" else 25.0
+    shape = _ar(0.9) if noise == "ar0.9" else None
+    y = add_noise(key_e, y0, snr, shape)
+    truth = ex.params().to_vector()
+    names = list(ex.orders.names)
+
+    def status(vector, start=Status.converged):
+        params = CascadeParams.from_vector(vector, ex.orders, check=False)
+        residual = simulate(params, u) - y
+        return Status(int(claim(start, params, residual, u, y, 5.0)))
+
+    assert status(truth) is Status.converged
+    assert status(truth.at[names.index("cR")].add(0.1)) is Status.local_minimum
+    assert status(truth.at[names.index("DR1")].set(0.999 * float(u.max()))) is Status.on_edge
+    assert status(truth, Status.max_iterations) is Status.max_iterations
+
+
+def _returning(vector):
+    def fixed(u, y, orders):
+        return vector
+
+    return fixed
+
+
+def test_a_host_functions_vector_gets_the_packages_word():
+    # a host function's finite vector is not "converged" by being finite: the truth is,
+    # a wrong backlash gap is a local minimum, a vector outside the domain left it
+    from jaxcascade._estimator._host import HostEstimator
+
+    ex, U, Y = records(1, 25.0, [0])
+    truth = np.asarray(ex.params().to_vector())
+    names = list(ex.orders.names)
+    wrong = truth.copy()
+    wrong[names.index("cR")] += 0.1
+    outside = truth.copy()
+    outside[names.index("mR")] = -1.0
+    for vector, expected in (
+        (truth, Status.converged),
+        (wrong, Status.local_minimum),
+        (outside, Status.left_domain),
+        (np.full_like(truth, np.nan), Status.failed),
+    ):
+        fit = HostEstimator("fixed", _returning(vector))()
+        assert Status(int(fit(U[0], Y[0], ex.orders).status)) is expected

@@ -74,8 +74,13 @@ def run_fit(args) -> int:
     status = Status(int(solution.status))
     estimates = solution.params.to_dict()
     # Which parameters the record does not determine: said beside the status (which the
-    # estimator and the sweeps share, unchanged), in the message and in the table.
-    unknown = not_identifiable(solution.params, errors, record.u) if not status.failure else {}
+    # estimator and the sweeps share, unchanged), in the message and in the table. A fit
+    # `on_edge` (a breakpoint at the end of the input's range: a sweep counts it a
+    # failure) is such a fit: named, the other estimates stand (exit code 0).
+    partial = status is Status.on_edge
+    unknown = (
+        not_identifiable(solution.params, errors, record.u) if not status.failure or partial else {}
+    )
     message = status.message
     if unknown:
         message += f" {_listed(list(unknown))} {_are(unknown)} not identifiable from this record."
@@ -93,12 +98,12 @@ def run_fit(args) -> int:
         # the standard errors are in model units, beside `estimates`
         result["estimates_physical"] = record.scaling.params_to_physical(estimates)
         result["scaling"] = record.scaling.to_dict()
-    code = FAILED if status.failure else 0
+    code = FAILED if status.failure and not (partial and unknown) else 0
     if args.json:
         print(strict_json(result))
         return code
     print(f"{args.estimator} estimator: {status.name} after {result['iterations']} iterations")
-    if status.failure:
+    if status.failure and code:
         print(f"failed: {status.message}")
     if unknown:
         print(

@@ -11,10 +11,16 @@ Python loop), and its time per fit is measured per record.
 
 `HostEstimator` is what the registry holds (the counterpart of an `Estimator` class:
 `settings()`, `summary`, called with settings it gives a `HostFit`); a `HostFit` is
-called like an `Estimator` and returns a `Solution` (host arrays): status `converged`
-and the vector, or `failed` with a finite stand-in (zeros) where the vector is not
-finite; `cost` is the mean squared simulation error of the estimate, `iterations` 1
-(0 when failed).
+called like an `Estimator` and returns a `Solution` (host arrays): the vector, or a
+finite stand-in (zeros) with status `failed` where it is not finite. A finite vector's
+status is the package's word, not the function's: `converged` only where its
+simulation error passes the validity tests every output-error estimator here must pass
+(`_basin.claim`, `robust`'s bound), else `left_domain` (outside the model's domain,
+`is_admissible`), `local_minimum` or `on_edge` (a host function
+that returns its best local fit is not thereby "converged": the SciPy example of
+`docs/examples/own_estimators.py` returned 87 of 300 noise-free random-family and
+example estimates more than 0.05 from the truth, `results/status_honesty.md`). `cost`
+is the mean squared simulation error of the estimate, `iterations` 1 (0 when failed).
 """
 
 from __future__ import annotations
@@ -23,11 +29,15 @@ import inspect
 from collections.abc import Callable
 from typing import Any
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 
-from .._model import CascadeParams, Orders
+from .._model import CascadeParams, Orders, is_admissible
 from .._status import Status
 from ._base import _describe, _matches, keyword_defaults
+from ._basin import claim
+from ._robust import DEFAULTS as ROBUST
 from ._solution import PATH_ONLY, Solution
 
 
@@ -77,6 +87,13 @@ class HostEstimator:
         return f"HostEstimator({self.name!r}, {self.function.__module__}.{self.function.__name__})"
 
 
+@jax.jit
+def _claim(params, residual, u, y):
+    inside = is_admissible(params, jnp.min(u), jnp.max(u))
+    status = jnp.where(inside, Status.converged, Status.left_domain)
+    return claim(status, params, residual, u, y, ROBUST["threshold"])
+
+
 class HostFit:
     """A host function with its settings, called like an `Estimator` on one record."""
 
@@ -105,15 +122,17 @@ class HostFit:
         ok = bool(np.all(np.isfinite(vector)))
         safe = np.where(ok, vector, 0.0)
         params = CascadeParams.from_vector(np.asarray(safe), orders, check=False)
-        cost = np.inf
+        cost, status = np.inf, Status.failed
         if ok:
-            cost = float(np.mean((np.asarray(simulate(params, np.asarray(u))) - y) ** 2))
+            residual = np.asarray(simulate(params, np.asarray(u))) - y
+            cost = float(np.mean(residual**2))
+            status = int(_claim(params, residual, np.asarray(u), np.asarray(y)))
         return Solution(
             params=params,
             history=np.asarray(safe)[None],
             iterations=np.asarray(int(ok), np.int32),
             cost=np.asarray(cost if np.isfinite(cost) else np.inf),
-            status=np.asarray(Status.converged if ok else Status.failed, np.int32),
+            status=np.asarray(status, np.int32),
             cycle_amplitude=np.asarray(0.0),
             path=np.asarray(PATH_ONLY, np.int32),
         )
