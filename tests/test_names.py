@@ -1,5 +1,5 @@
 """`_names` (the registries' names, for `--help` without JAX) equals each registry, and the
-README's list of the loop's effects is the library's."""
+docs' list of the loop's effects (docs/loop.md) is the library's."""
 
 import pathlib
 import re
@@ -13,7 +13,7 @@ from jaxcascade._inputs import INPUTS
 from jaxcascade._montecarlo._spec import FAMILIES
 from jaxcascade._noise import ARNoise
 
-README = pathlib.Path(__file__).parents[1] / "README.md"
+LOOP_PAGE = pathlib.Path(__file__).parents[1] / "docs" / "loop.md"
 
 
 def test_names_equal_the_registries():
@@ -27,7 +27,7 @@ def test_names_equal_the_registries():
     assert _names.NOISES == {name: cls.summary for name, cls in NOISES.items()}
 
 
-def test_readme_lists_the_loops_effects():
-    text = " ".join(README.read_text().split())
+def test_docs_list_the_loops_effects():
+    text = " ".join(LOOP_PAGE.read_text().split())
     listed = text.split("Otherwise each effect of the library (", 1)[1].split(")", 1)[0]
     assert re.findall(r"`([a-z_]+)`", listed) == [*EFFECTS, ARNoise.name]
