@@ -34,7 +34,9 @@ Efficiency
     is), `standard_errors` (of a fit).
 Monte-Carlo sweeps
     `Spec`, `Cell`, `run`, `run_chunk`, `run_realisation`, `cell_key`, `chunk_memory`;
-    `summarise`, `compare`, `read_summary`, `read_metadata`; `plot_sweep`.
+    `summarise`, `compare_sweeps` (a sweep's summary against a baseline's; `compare`,
+    its deprecated alias, goes in the next release), `read_summary`, `read_metadata`;
+    `plot_sweep`.
 On-line identification and systems that change
     `Recursive` / `recursive` (the key-term regression by recursive least squares with
     forgetting, the paper's closing remark); `Change`, `trajectory`,
@@ -165,6 +167,7 @@ _MODULES = {
     ),
     "._montecarlo._tables": (
         "compare",
+        "compare_sweeps",
         "read_metadata",
         "read_summary",
         "summarise",

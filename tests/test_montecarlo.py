@@ -17,6 +17,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+import jaxcascade
 from jaxcascade._cli import main
 from jaxcascade._montecarlo._engine import (
     cell_identity,
@@ -26,7 +27,12 @@ from jaxcascade._montecarlo._engine import (
 )
 from jaxcascade._montecarlo._run import run, summary_path
 from jaxcascade._montecarlo._spec import Cell, Spec
-from jaxcascade._montecarlo._tables import compare, read_metadata, summarise, without_timing
+from jaxcascade._montecarlo._tables import (
+    compare_sweeps,
+    read_metadata,
+    summarise,
+    without_timing,
+)
 
 N = 300
 
@@ -176,20 +182,31 @@ def test_summary_statistics_and_standard_errors():
     assert row["nrmse_median"] == pytest.approx(0.35)
 
 
-def test_compare_flags_a_shifted_bias_and_passes_an_identical_baseline():
+def test_compare_sweeps_flags_a_shifted_bias_and_passes_an_identical_baseline():
     summary = summarise(synthetic_table())
-    assert not compare(summary, summary)["flagged"].any()
+    assert not compare_sweeps(summary, summary)["flagged"].any()
     shifted = summary.copy()
     shifted["bias"] += 4 * np.sqrt(2) * shifted["bias_se"]  # 4 combined SEs away
-    result = compare(summary, shifted)
+    result = compare_sweeps(summary, shifted)
     flagged = result[result["flagged"]]
     assert list(flagged["statistic"]) == ["bias"] and list(flagged["parameter"]) == ["X"]
     nudged = summary.copy()
     nudged["bias"] += 1 * nudged["bias_se"]  # within Monte-Carlo error
-    assert not compare(summary, nudged)["flagged"].any()
+    assert not compare_sweeps(summary, nudged)["flagged"].any()
     elsewhere = summary.assign(n=999)
     with pytest.raises(ValueError, match="shares no grid cell"):
-        compare(summary, elsewhere)
+        compare_sweeps(summary, elsewhere)
+
+
+def test_compare_is_a_deprecated_alias_of_compare_sweeps():
+    # `compare` compared two sweeps; MATLAB's `compare` compares a model with data: renamed,
+    # the old name kept one release, warning
+    summary = summarise(synthetic_table())
+    shifted = summary.copy()
+    shifted["bias"] += 4 * np.sqrt(2) * shifted["bias_se"]
+    with pytest.warns(DeprecationWarning, match="compare_sweeps"):
+        old = jaxcascade.compare(summary, shifted)
+    pd.testing.assert_frame_equal(old, compare_sweeps(summary, shifted))
 
 
 # ---- specs -------------------------------------------------------------------------------

@@ -165,7 +165,7 @@ def _tracking(spec, table, out, plots) -> None:
 def sweep(args) -> int:
     # imported here, not at the top: `--help` answers without importing JAX
     from .._montecarlo._run import run, summary_path
-    from .._montecarlo._tables import CELL_COLUMNS, compare, read_summary, summarise
+    from .._montecarlo._tables import CELL_COLUMNS, compare_sweeps, read_summary, summarise
     from .._plot._sweep import plot_sweep, sweep_figures
 
     spec = spec_from_args(args)
@@ -216,7 +216,7 @@ def sweep(args) -> int:
                 path.unlink(missing_ok=True)
         print(f"plots: {', '.join(str(p) for p in paths)}")
     if baseline is not None:
-        result = compare(summary, baseline, args.threshold)
+        result = compare_sweeps(summary, baseline, args.threshold)
         flagged = result[result["flagged"]]
         checked = len(result)
         if flagged.empty:

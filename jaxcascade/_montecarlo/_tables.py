@@ -48,7 +48,7 @@ Beside them, the output-error Cramér-Rao bound `crlb_std` (the realisation tabl
 `crlb_<name>` columns hold each record's own bound; the cell's is the root of their
 mean square, `_efficiency`) and the efficiency `crlb_std^2 / std^2` (1: the estimator
 extracts all the information in the records), each with its standard error. The
-regression comparison (`compare`) looks at bias and std only.
+regression comparison (`compare_sweeps`) looks at bias and std only.
 """
 
 from __future__ import annotations
@@ -56,6 +56,7 @@ from __future__ import annotations
 import json
 import pathlib
 import sys
+import warnings
 
 import numpy as np
 import pandas as pd
@@ -389,8 +390,11 @@ def read_summary(path) -> pd.DataFrame:
     return frame
 
 
-def compare(summary: pd.DataFrame, baseline: pd.DataFrame, threshold: float = 3.0) -> pd.DataFrame:
-    """Bias and std of every shared cell and parameter, against a baseline summary.
+def compare_sweeps(
+    summary: pd.DataFrame, baseline: pd.DataFrame, threshold: float = 3.0
+) -> pd.DataFrame:
+    """Bias and std of every shared cell and parameter of a sweep's summary, against a
+    baseline sweep's summary (`read_summary`; `jaxcascade sweep --compare BASELINE`).
 
     A statistic is `flagged` when `|now - baseline| > threshold * sqrt(se_now^2 + se_base^2)`,
     i.e. when the change is more than Monte-Carlo error explains (about 3 in 1000 rows at
@@ -427,6 +431,22 @@ def compare(summary: pd.DataFrame, baseline: pd.DataFrame, threshold: float = 3.
             )
         )
     return pd.concat(rows, ignore_index=True)
+
+
+def compare(summary: pd.DataFrame, baseline: pd.DataFrame, threshold: float = 3.0) -> pd.DataFrame:
+    """Deprecated alias of `compare_sweeps`, kept for one release.
+
+    Renamed because it compares two sweeps' summaries, where MATLAB's `compare` compares a
+    model with measured data. Warns (`DeprecationWarning`) and returns what
+    `compare_sweeps` returns.
+    """
+    warnings.warn(
+        "jaxcascade.compare is deprecated and goes in the next release: use "
+        "jaxcascade.compare_sweeps (it compares a sweep's summary with a baseline's).",
+        DeprecationWarning,
+        stacklevel=2,
+    )
+    return compare_sweeps(summary, baseline, threshold)
 
 
 # ---- Parquet with metadata -------------------------------------------------------------
