@@ -132,3 +132,15 @@ def test_an_estimate_on_the_domain_edge_is_not_accepted():
     row = jc.run_chunk(spec, spec.cells()[0], [17]).iloc[0]
     assert row["admissible"] and row["robust_path"] == "multistart"
     assert row["status"] == "converged" and row["recovered"]
+
+
+def test_multistart_recovers_a_record_the_literal_path_cannot(records):
+    # End to end at the defaults: the noise-free Example 2 record whose literal-then-
+    # refined fit ends in a wrong basin (`test_adaptive_path_refuses_a_wrong_basin`). The
+    # multi-start finds the true basin: the truth to rounding, `converged`. (Without the
+    # multi-start, the cheapest estimate is the wrong basin's: `local_minimum`.)
+    u, y, truth = records[1]
+    solution = jc.robust(u, y, ORDERS, jax.random.PRNGKey(0))
+    assert int(solution.path) == PATH_MULTISTART
+    assert jc.Status(int(solution.status)) is jc.Status.converged
+    np.testing.assert_allclose(solution.params.to_vector(), truth.to_vector(), atol=1e-6)
