@@ -49,7 +49,9 @@ Measured data and the model-error loop
     `residual_tests`, `ResidualTests`, `regime_from_switches`, `plot_residual_tests`,
     `residual_figures`, `save_residual_figures`; `model_error_loop`, `LoopResult`,
     `EFFECTS`, `Effect`, `ExtendedModel`, `simulate_extended`, `ARNoise`; `ARX`,
-    `fit_arx`, `best_arx`; `nrmse`, `fit_percent`; `benchmark_data`, `Benchmark`,
+    `fit_arx`, `best_arx`; `nrmse`, `fit_percent`; `load_model`, `SavedModel` (a model
+    file of `loop --report` or `fit --save-model`: `simulate(u)`, `score(u, y)`,
+    `compare(record)`, `save(path)`); `benchmark_data`, `Benchmark`,
     `BenchmarkRecord`, `BENCHMARKS` (the community's benchmarks of nonlinearbenchmark.org,
     read from their MAT files and split as the official loader `nonlinear-benchmarks` does,
     with each test record's `n_init` and the published baselines).
@@ -143,6 +145,10 @@ _MODULES = {
     "._loop": (
         "LoopResult",
         "model_error_loop",
+    ),
+    "._model_file": (
+        "SavedModel",
+        "load_model",
     ),
     "._metrics": (
         "fit_percent",

@@ -10,7 +10,7 @@ import pytest
 
 from jaxcascade._cli import build_parser
 
-COMMANDS = ("reproduce", "sweep", "fit", "loop", "bench")
+COMMANDS = ("reproduce", "sweep", "fit", "loop", "simulate", "bench")
 HEAVY = ("jax", "jaxlib", "numpy", "pandas", "matplotlib", "equinox", "scipy")
 
 # In a fresh interpreter: every command's --help, then the heavy packages imported so far.

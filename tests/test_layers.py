@@ -31,6 +31,7 @@ LAYERS = [
         "_initial_state",
         "_scoring",
         "_integrating",
+        "_model_file",
     },
     {"_montecarlo"},
     {"_plot", "_benchmark"},

@@ -1,7 +1,7 @@
 """The command line, `jaxcascade COMMAND ...`: the only place that knows argparse.
 
-One module per command (`_reproduce`, `_sweep`, `_fit`, `_loop`, `_bench`), each with
-`add_parser(subparsers)`; the parser's `func(args) -> int` runs it. Domain code raises
+One module per command (`_reproduce`, `_sweep`, `_fit`, `_loop`, `_simulate`, `_bench`),
+each with `add_parser(subparsers)`; the parser's `func(args) -> int` runs it. Domain code raises
 `ValueError` for problems a user can fix; here every such error (and `CLIError`,
 `OSError`) leaves as one line on stderr with exit code 2, never a traceback.
 """
@@ -14,11 +14,11 @@ import sys
 # Each command module imports JAX, NumPy and pandas inside the function that runs it, so
 # `--help` answers at once (tests/test_help.py holds that no help imports JAX).
 from .._version import __version__
-from . import _bench, _fit, _loop, _reproduce, _sweep
+from . import _bench, _fit, _loop, _reproduce, _simulate, _sweep
 from ._common import CLIError, Parser, examples
 
 # Commands in the order shown by --help.
-_COMMANDS = (_reproduce, _sweep, _fit, _loop, _bench)
+_COMMANDS = (_reproduce, _sweep, _fit, _loop, _simulate, _bench)
 
 
 def build_parser() -> Parser:
@@ -34,6 +34,7 @@ def build_parser() -> Parser:
             "jaxcascade fit record.csv --input u --output y --decimate 8",
             "jaxcascade loop train.csv --validate valid.csv --input u --output y "
             "--report runs/loop",
+            "jaxcascade simulate runs/loop/model.json test.csv --input u --output y",
             "jaxcascade bench --estimator robust --system example1 --json",
         ),
     )

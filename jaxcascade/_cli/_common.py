@@ -46,10 +46,9 @@ RECORD_SPEC = (
 )
 
 
-def add_record_arguments(parser, *, scaling: str, required: bool = False) -> None:
-    """Options shared by the commands that read a measured record (`fit`, `loop`); their
-    records are record specs (`RECORD_SPEC`), read by `read_record(spec,
-    **record_options(args))`."""
+def add_signal_arguments(parser, *, required: bool = False) -> None:
+    """The options that name a record's signals, its sample period and units (`fit`,
+    `loop`, `simulate`)."""
     parser.add_argument(
         "--input",
         required=required,
@@ -76,6 +75,13 @@ def add_record_arguments(parser, *, scaling: str, required: bool = False) -> Non
         metavar="INPUT_UNIT,OUTPUT_UNIT",
         help="physical units of input and output, kept with the record (e.g. V,mm)",
     )
+
+
+def add_record_arguments(parser, *, scaling: str, required: bool = False) -> None:
+    """Options shared by the commands that read a measured record (`fit`, `loop`); their
+    records are record specs (`RECORD_SPEC`), read by `read_record(spec,
+    **record_options(args))`."""
+    add_signal_arguments(parser, required=required)
     parser.add_argument(
         "--detrend",
         default="none",

@@ -3,7 +3,8 @@
 The report (`--report DIR`) holds `report.json` (what `--json` prints, plus the
 models and the ARX peer), `report.md`, `candidates.csv`, the measured versus simulated
 validation output before and after (`compare.png`), and the residual tests before and
-after (`residual_before_*.png`, `residual_after_*.png`).
+after (`residual_before_*.png`, `residual_after_*.png`), and the final model as a model
+file (`model.json`, `_model_file`: `jaxcascade simulate` applies it to new records).
 """
 
 from __future__ import annotations
@@ -433,6 +434,15 @@ def run_loop(args) -> int:
         command = "jaxcascade loop " + " ".join(sys.argv[2:])
         (folder / "report.json").write_text(strict_json(full, indent=1))
         (folder / "report.md").write_text(_markdown(full, command))
+        from .._model_file import SavedModel  # the final model, for `jaxcascade simulate`
+
+        SavedModel.from_record(
+            result.final,
+            training[0],
+            init_samples=args.init_samples,
+            integrating=integrating is not None,
+            provenance={"command": command, "declared": full["structure_before"]},
+        ).save(folder / "model.json")
         import pandas as pd
 
         pd.DataFrame(full["candidates"]).to_csv(folder / "candidates.csv", index=False)
