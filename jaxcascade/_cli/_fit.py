@@ -10,6 +10,7 @@ that stays the estimator's.
 from __future__ import annotations
 
 import math
+import sys
 
 from ._common import (
     RECORD_SPEC,
@@ -99,6 +100,14 @@ def run_fit(args) -> int:
         result["estimates_physical"] = record.scaling.params_to_physical(estimates)
         result["scaling"] = record.scaling.to_dict()
     code = FAILED if status.failure and not (partial and unknown) else 0
+    if args.save_model:
+        from .._effects import plain
+        from .._model_file import SavedModel
+
+        fitted = plain(solution.params)
+        provenance = {"command": "jaxcascade fit " + " ".join(sys.argv[2:]), "status": status.name}
+        SavedModel.from_record(fitted, record, provenance=provenance).save(args.save_model)
+        result["model_file"] = str(args.save_model)
     if args.json:
         print(strict_json(result))
         return code
@@ -153,6 +162,13 @@ def add_parser(subparsers) -> None:
         default="robust",
         metavar="NAME",
         help=f"default robust; {estimator_help()}",
+    )
+    parser.add_argument(
+        "--save-model",
+        default=None,
+        metavar="PATH",
+        help="write the fitted cascade as a model file (JSON, docs/models.md), which "
+        "'jaxcascade simulate PATH RECORD' applies to new records",
     )
     parser.add_argument("--json", action="store_true", help="print a JSON result")
     parser.set_defaults(func=run_fit)
