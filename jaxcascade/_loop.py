@@ -37,6 +37,7 @@
 from __future__ import annotations
 
 import dataclasses
+import time
 
 import equinox as eqx
 import jax
@@ -62,6 +63,14 @@ from ._efficiency import standard_errors
 from ._estimator._refine import from_unconstrained, least_squares, to_unconstrained
 from ._estimator._robust import Robust
 from ._initial_state import initialise
+from ._loop_checkpoint import (
+    Checkpoints,
+    identity,
+    model_from_dict,
+    model_to_dict,
+    params_from_dict,
+    params_to_dict,
+)
 from ._metrics import score
 from ._model import CascadeParams, Orders
 from ._noise import ARNoise
@@ -540,6 +549,7 @@ def model_error_loop(
     robust: Robust | None = None,
     key=None,
     init_samples: int = 0,
+    checkpoints: Checkpoints | None = None,
 ) -> LoopResult:
     """Run the loop (module docstring) on an estimation and a validation record.
 
@@ -569,8 +579,16 @@ def model_error_loop(
       nonlinear benchmarks' convention, and on the samples after them.
     - `robust`, `key`: the estimator of the declared cascade (default `Robust()`) and its
       PRNG key (the multi-start's draws; default `PRNGKey(0)`).
+    - `checkpoints`: where the loop keeps its work (`_loop_checkpoint.Checkpoints`): every
+      finished fit and round is written there as it finishes, and a resumed run loads
+      the finished fits instead of refitting them (same decisions, estimates and
+      errors); it also keeps where the loop is (`Checkpoints.where`) for an interrupted
+      run's report. Progress (`progress`) says the round, the candidate, the time
+      elapsed and an estimate of the round's remaining time.
     """
     say = progress or (lambda message: None)
+    store = Checkpoints() if checkpoints is None else checkpoints
+    started = time.monotonic()
     compiled_before = compile_count()
     us, ys = _records(u_est, y_est)
     if len(us) != len(ys):
@@ -588,7 +606,31 @@ def model_error_loop(
     def assess(model):
         return evaluate(model, u_val_np, y_val_np, sample_period, window, init_samples)
 
-    if base is None:
+    names = tuple(effects or (*EFFECTS, ARNoise.name))
+    options = {
+        "orders": str(orders),
+        "base": None if base is None else np.asarray(base.to_vector()).tolist(),
+        "max_effects": int(max_effects),
+        "t_threshold": float(t_threshold),
+        "min_gain": float(min_gain),
+        "noise_alpha": float(noise_alpha),
+        "sample_period": float(sample_period),
+        "effects": list(names),
+        "window": None if window is None else [int(w) for w in window],
+        "init_samples": int(init_samples),
+        "robust": _settings(Robust() if robust is None else robust),
+        "key": None if key is None else _key_data(key),
+        "records": len(us),
+    }
+    found = store.start(identity([*us, *ys, u_val, y_val], options))
+    if found:
+        say(f"resuming from '{store.folder}': {found} finished fit(s) and round(s) kept there")
+    stored = store.load("declared")
+    if stored is not None:
+        base = params_from_dict(stored["params"])
+        say("the declared cascade's fit loaded from its checkpoint")
+    elif base is None:
+        store.at("declared")
         say("fitting the declared cascade (robust estimator)")
         estimator = Robust() if robust is None else robust
         fitted = estimator(jnp.concatenate(us), jnp.concatenate(ys), orders, key=key)
@@ -606,17 +648,20 @@ def model_error_loop(
         if len(us) > 1 or moved:
             say("refining it on every estimation record")
             base = refit(plain(base), _no_effect(base), us, ys)[0].params
+    if stored is None:
+        store.save("declared", {"params": params_to_dict(base)})
     model = plain(base)
     current = assess(model)
     before = current
     steps = [("declared cascade", model, current)]
-    names = tuple(effects or (*EFFECTS, ARNoise.name))
     added: list[str] = []
     actions: list[dict] = []
     candidates: list[Candidate] = []
+    fit_seconds: list[float] = []  # of the candidates fitted (not loaded) by this run
     for round_ in range(1, max_effects + 1):
         if current.tests.ok:
             say(f"round {round_}: every residual test passes; nothing to add")
+            store.save(f"round-{round_:02d}", {"round": round_, "outcome": "every test passes"})
             break
         failed = set(current.tests.failed)
         say(f"round {round_}: failed tests {sorted(failed)}; error {current.error:.4g}")
@@ -648,11 +693,35 @@ def model_error_loop(
             "min_gain": min_gain,
             "validation_scale": float(np.var(y_val_np[int(init_samples) :])),
         }
-        for name, action in [(n, "add") for n in tried] + [(n, "replace") for n in replacing]:
-            c = _candidate(name, *fit_against, **judged_by, action=action)
-            if c is None:
+        todo = [(n, "add") for n in tried] + [(n, "replace") for n in replacing]
+        noise_tried = ARNoise.name in names and ARNoise.name not in added
+        count = len(todo) + noise_tried
+
+        def announce(k, name, loaded, round_=round_, count=count):
+            store.at("candidate", round=round_, k=k, n=count, candidate=name)
+            say(_progress_line(round_, k, count, name, loaded, started, fit_seconds))
+
+        for k, (name, action) in enumerate(todo, start=1):
+            item = f"round-{round_:02d}-{action}-{name}"
+            saved = store.load(item)
+            announce(k, name, saved is not None)
+            if saved is None:
+                began = time.monotonic()
+                fit = _fit_candidate(name, model, us, ys, records, action)
+                fit_seconds.append(time.monotonic() - began)
+            else:
+                fit = (
+                    None
+                    if saved["model"] is None
+                    else (model_from_dict(saved["model"]), saved["label"])
+                )
+            if fit is None:
+                store.save(item, {"round": round_, "name": name, "action": action, "model": None})
                 say(f"  {name:<24} no start on these records; not tried")
                 continue
+            c = _score_candidate(name, fit[1], fit[0], *fit_against, **judged_by, action=action)
+            if saved is None:
+                store.save(item, _candidate_checkpoint(c))
             round_candidates.append(c)
             # Each candidate compiles programs of its own structure (about a hundred
             # memory mappings each, measured on the damper): freed past a bound, so
@@ -662,14 +731,35 @@ def model_error_loop(
                 f"  {c.label:<24} error {c.error:.4g}  t {c.t:7.2f}  "
                 f"{'significant' if c.significant else ''}"
             )
-        if ARNoise.name in names and ARNoise.name not in added:
-            c = _noise_candidate(*fit_against, **judged_by, noise_alpha=noise_alpha)
+        if noise_tried:
+            item = f"round-{round_:02d}-add-{ARNoise.name}"
+            saved = store.load(item)
+            announce(count, ARNoise.name, saved is not None)
+            if saved is None:
+                began = time.monotonic()
+                noise_model, p_value = _fit_noise(model, us, ys, records)
+                fit_seconds.append(time.monotonic() - began)
+            else:
+                noise_model, p_value = model_from_dict(saved["model"]), saved["p_value"]
+            c = _score_noise(
+                noise_model,
+                p_value,
+                current,
+                failed,
+                round_,
+                assess,
+                **judged_by,
+                noise_alpha=noise_alpha,
+            )
+            if saved is None:
+                store.save(item, {**_candidate_checkpoint(c), "p_value": p_value})
             round_candidates.append(c)
             say(
                 f"  {c.label:<24} prediction error {c.evaluation.prediction_error:.4g}  "
                 f"t {c.t:7.2f}  {'significant' if c.significant else ''}"
             )
         candidates += round_candidates
+        store.at("round", round=round_)
         deterministic = [c for c in round_candidates if c.significant and c.name != ARNoise.name]
         if deterministic:
             # the residual's signature ranks first only where it can be trusted (above)
@@ -688,6 +778,7 @@ def model_error_loop(
             ]
             if not noise_candidates:
                 say(f"round {round_}: no candidate explains the residual significantly; stop")
+                store.save(f"round-{round_:02d}", {"round": round_, "outcome": "nothing added"})
                 break
             chosen = noise_candidates[0]
         verb = "replacing the cascade by" if chosen.action == "replace" else "adding"
@@ -697,11 +788,20 @@ def model_error_loop(
         model, current = chosen.model, chosen.evaluation
         prefix = "replaces the cascade: " if chosen.action == "replace" else "+ "
         steps.append((f"{prefix}{chosen.label}", model, current))
+        outcome = {"effect": chosen.name, "action": chosen.action, "label": chosen.label}
+        store.save(f"round-{round_:02d}", {"round": round_, "outcome": "added", **outcome})
         # The round's candidates compiled programs of their own structures (each
         # stays mapped in memory until released): freed past the bound.
         bound()
-    say("standard errors of the final model on the estimation records")
-    errors = model_standard_errors(model, us, ys)
+    stored = store.load("standard-errors")
+    if stored is None:
+        store.at("standard_errors")
+        say("standard errors of the final model on the estimation records")
+        errors = model_standard_errors(model, us, ys)
+        store.save("standard-errors", {"errors": errors})
+    else:
+        errors = stored["errors"]
+    store.at("report")
     return LoopResult(
         before,
         current,
@@ -764,8 +864,19 @@ def _candidate(name, model, current, failed, round_, us, ys, records, assess, **
     """Fit the effect `name` added to `model` (`action="add"`), or in place of its cascade
     (`action="replace"`: the effect's path from the input plus a fitted output offset,
     the model's other effects kept), and score it on the validation record."""
-    t_threshold, min_gain = options.get("t_threshold", 3.0), options.get("min_gain", 0.02)
     action = options.get("action", "add")
+    fit = _fit_candidate(name, model, us, ys, records, action)
+    if fit is None:
+        return None
+    fitted, label = fit
+    return _score_candidate(
+        name, label, fitted, model, current, failed, round_, us, ys, records, assess, **options
+    )
+
+
+def _fit_candidate(name, model, us, ys, records, action="add"):
+    """The fit of `_candidate`: `(fitted model, label)`, or None where the effect has no
+    start on these records."""
     effect = EFFECTS[name]
     if action == "replace":
         offset = float(np.mean(np.concatenate([np.asarray(y) for y in ys])))
@@ -773,18 +884,29 @@ def _candidate(name, model, current, failed, round_, us, ys, records, assess, **
             cascade=False, effects=(*model.effects, OutputOffset(jnp.asarray(offset)))
         )
         fitted, _, label = fit_parallel(alone, effect, us, ys)
-        label = f"replace:{label}"
-    elif effect.linear:
+        return fitted, f"replace:{label}"
+    if effect.linear:
         fitted, _, label = fit_parallel(model, effect, us, ys)
-    else:
-        best = None
-        for start in effect.starts_records(model, records):
-            fitted, cost, _ = refit(model, start, us, ys, effect.refine_steps)
-            if best is None or cost < best[1]:
-                best = (fitted, cost, start.label)
-        if best is None:
-            return None  # no start on these records (a segment where the input never goes)
-        fitted, _, label = best
+        return fitted, label
+    best = None
+    for start in effect.starts_records(model, records):
+        fitted, cost, _ = refit(model, start, us, ys, effect.refine_steps)
+        if best is None or cost < best[1]:
+            best = (fitted, cost, start.label)
+    if best is None:
+        return None  # no start on these records (a segment where the input never goes)
+    return best[0], best[2]
+
+
+def _score_candidate(
+    name, label, fitted, model, current, failed, round_, us, ys, records, assess, **options
+):
+    """The score of `_candidate`: the fitted model on the validation record, and the
+    Diebold-Mariano test against the current model (deterministic: a resumed loop scores
+    a loaded fit again, `_loop_checkpoint`)."""
+    t_threshold, min_gain = options.get("t_threshold", 3.0), options.get("min_gain", 0.02)
+    action = options.get("action", "add")
+    effect = EFFECTS[name]
     evaluation = assess(fitted)
     # The evidence of every record: the validation record out of sample and the
     # estimation records in sample, each a squared NRMSE difference (module docstring).
@@ -818,11 +940,24 @@ def _noise_candidate(model, current, failed, round_, us, ys, records, assess, **
     `model`, the model then refitted on the prediction error it defines (an output-error
     fit is biased by coloured noise, and the whitened residual shows that bias to the
     input tests), judged on the validation record's one-step-ahead prediction error."""
+    noise_model, p_value = _fit_noise(model, us, ys, records)
+    return _score_noise(noise_model, p_value, current, failed, round_, assess, **options)
+
+
+def _fit_noise(model, us, ys, records):
+    """The fit of `_noise_candidate`: `(model with the noise model, p-value of the
+    likelihood-ratio test against white noise)`."""
     noise, p_value = ARNoise.fit_records([r[2] for r in records])
     noise_model = model.with_(noise=noise)
     if noise.order and (model.cascade or model.effects):
         refitted, _, _ = refit(noise_model, _no_effect(model.params), us, ys)
         noise_model = refitted.with_(effects=refitted.effects[:-1], noise=noise)
+    return noise_model, float(p_value)
+
+
+def _score_noise(noise_model, p_value, current, failed, round_, assess, **options):
+    """The score of `_noise_candidate`."""
+    noise = noise_model.noise
     evaluation = assess(noise_model)
     comparison = diebold_mariano(current.innovation, evaluation.innovation, "prediction")
     gain = 1 - evaluation.prediction_error / current.prediction_error
@@ -844,6 +979,48 @@ def _noise_candidate(model, current, failed, round_, us, ys, records, assess, **
         evaluation,
         comparison,
     )
+
+
+def _candidate_checkpoint(c: Candidate) -> dict:
+    """A finished candidate as `_loop_checkpoint` keeps it: its fit in full, its scores
+    for the reader (a resumed run scores the fit again)."""
+    return {
+        "round": c.round,
+        "name": c.name,
+        "action": c.action,
+        "label": c.label,
+        "model": model_to_dict(c.model),
+        "scores": {"error": c.error, "t": c.t, "significant": c.significant},
+    }
+
+
+def _settings(module) -> dict:
+    """An estimator's settings (its fields) as strings, for a run's identity."""
+    return {f.name: repr(getattr(module, f.name)) for f in dataclasses.fields(module)}
+
+
+def _key_data(key) -> list:
+    """A PRNG key's bits as a list (a typed key's data, or a raw `uint32` key)."""
+    if jnp.issubdtype(key.dtype, jax.dtypes.prng_key):
+        key = jax.random.key_data(key)
+    return np.asarray(key).tolist()
+
+
+def _progress_line(round_, k, n, name, loaded, started, fit_seconds) -> str:
+    """`round R, candidate k of n: NAME (elapsed, estimate of the round's remaining time:
+    the mean time of this run's fits so far times the candidates left)`."""
+    line = f"round {round_}, candidate {k} of {n}: {name} ({_duration(time.monotonic() - started)}"
+    if loaded:
+        return f"{line} elapsed; its fit loaded from its checkpoint)"
+    if fit_seconds:
+        left = float(np.mean(fit_seconds)) * (n - k + 1)
+        return f"{line} elapsed, about {_duration(left)} left in this round)"
+    return f"{line} elapsed)"
+
+
+def _duration(seconds: float) -> str:
+    seconds = int(round(seconds))
+    return f"{seconds // 60} min {seconds % 60:02d} s" if seconds >= 60 else f"{seconds} s"
 
 
 def _no_effect(params: CascadeParams) -> Start:

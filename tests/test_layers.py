@@ -27,6 +27,7 @@ LAYERS = [
         "_effects",
         "_noise",
         "_loop",
+        "_loop_checkpoint",
         "_testing",
         "_initial_state",
         "_scoring",

@@ -5,6 +5,8 @@ models and the ARX peer), `report.md`, `candidates.csv`, the measured versus sim
 validation output before and after (`compare.png`), and the residual tests before and
 after (`residual_before_*.png`, `residual_after_*.png`), and the final model as a model
 file (`model.json`, `_model_file`: `jaxcascade simulate` applies it to new records).
+While the loop runs, every finished fit and round is kept in `DIR/checkpoints/`
+(`_loop_resume`: `--resume`, `--overwrite`, Ctrl-C).
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ from ._common import (
     strict_json,
     writable_folder,
 )
+from ._loop_resume import add_arguments as add_resume_arguments
 
 
 def _f(value) -> str:
@@ -232,6 +235,12 @@ def _windows(texts, decimate: int, records) -> list:
 
 
 def run_loop(args) -> int:
+    from ._loop_resume import run_kept
+
+    return run_kept(args, _run_loop)
+
+
+def _run_loop(args, checkpoints) -> int:
     # imported here, not at the top: `--help` answers without importing JAX
     import jax
     import numpy as np
@@ -325,6 +334,7 @@ def run_loop(args) -> int:
         t_threshold=args.dm_threshold,
         min_gain=args.min_gain,
         key=jax.random.PRNGKey(args.seed),
+        checkpoints=checkpoints,
     )
     full = result.to_dict()
     full["robust"] = {"retries": args.retries, "seed": args.seed}
@@ -726,6 +736,8 @@ def add_parser(subparsers) -> None:
             "--input u --output y --init-samples 50 --report results/loop",
             "jaxcascade loop --benchmark CED --data ../shared/data/nonlinear_benchmarks "
             "--report results/ced --json",
+            "jaxcascade loop train.csv --validate valid.csv --input u --output y "
+            "--report results/loop --resume",
         ),
     )
     parser.add_argument(
@@ -838,7 +850,14 @@ def add_parser(subparsers) -> None:
         "scoring: auto (default) when no stable linear ARX model fits the estimation "
         "records (an output that integrates its input, a position under feedback)",
     )
-    parser.add_argument("--report", default=None, help="folder for the report and figures")
+    parser.add_argument(
+        "--report",
+        default=None,
+        metavar="DIR",
+        help="folder for the report and figures; the loop keeps its finished fits in "
+        "DIR/checkpoints/ while it runs (see --resume)",
+    )
+    add_resume_arguments(parser)
     parser.add_argument("--json", action="store_true", help="print the JSON summary")
     parser.add_argument("--quiet", action="store_true", help="no progress on stderr")
     parser.set_defaults(func=run_loop)
