@@ -6,6 +6,7 @@ back to the same model, and a bad file or a record sampled otherwise is one line
 import contextlib
 import io
 import json
+import pathlib
 
 import jax
 import numpy as np
@@ -176,3 +177,31 @@ def test_effects_and_noise_round_trip(tmp_path):
         np.testing.assert_allclose(
             loaded.simulate(u), scaling.output_to_physical(direct), rtol=1e-12, atol=1e-12
         )
+
+
+# the shared data beside the checkout, as tests/test_benchmark_data.py finds it
+CED = pathlib.Path(__file__).resolve().parents[2] / "shared" / "data" / "nonlinear_benchmarks"
+
+
+@pytest.mark.slow  # the loop on CED and the simulation: about a minute and a half
+@pytest.mark.skipif(not (CED / "CED" / "DATAUNIF.MAT").is_file(), reason="CED data not here")
+def test_simulate_reproduces_the_ced_test_figures(tmp_path):
+    # The benchmark's official test records, named as record specs (the loop cuts them
+    # at sample 400 of each file, _benchmark_data._ced), give the loop's test figures.
+    argv = ["loop", "--benchmark", "CED", "--data", str(CED), "--max-effects", "0"]
+    argv += ["--report", str(tmp_path / "ced"), "--json", "--quiet"]
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        assert main(argv) == 0
+    result = json.loads(out.getvalue())
+    mat = CED / "CED" / "DATAUNIF.MAT"
+    specs = [f"{mat}:u11,z11:400:", f"{mat}:u12,z12:400:"]
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        assert main(["simulate", str(tmp_path / "ced" / "model.json"), *specs, "--json"]) == 0
+    rows = json.loads(out.getvalue())["records"]
+    tests = result["benchmark"]["tests"]
+    for row, expected, bench in zip(rows, result["test"], tests, strict=True):
+        for key in ("error", "error_from_rest"):
+            assert row[key] == pytest.approx(expected[key], rel=1e-9), key
+        assert row["rmse"] == pytest.approx(bench["test_rmse"], rel=1e-9)
