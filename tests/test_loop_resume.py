@@ -204,7 +204,7 @@ def test_a_loop_killed_with_sigkill_resumes_to_the_uninterrupted_result(records,
         assert time.monotonic() < deadline
         time.sleep(0.05)
     killed.send_signal(signal.SIGKILL)
-    killed.wait()
+    killed.communicate()  # waits, and closes its pipes
     assert killed.returncode == -signal.SIGKILL
     assert not (report / "report.json").exists()
     kept = {p.name for p in (report / "checkpoints").iterdir()}
