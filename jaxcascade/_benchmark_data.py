@@ -49,13 +49,13 @@ _N_INIT = {
     },
 }
 
-# (unit of the reported RMSE, factor from the file's y to that unit)
+# (unit of the reported RMSE, factor from the file's y to that unit, the file's unit of y)
 _UNITS = {
-    "EMPS": ("mm", 1000.0),  # files hold metres
-    "CED": ("ticks/s", 1.0),
-    "Silverbox": ("mV", 1000.0),  # files hold volts
-    "Cascaded_Tanks": ("V", 1.0),
-    "WienerHammerBenchMark": ("mV", 1000.0),  # files hold volts
+    "EMPS": ("mm", 1000.0, "m"),
+    "CED": ("ticks/s", 1.0, "ticks/s"),
+    "Silverbox": ("mV", 1000.0, "V"),
+    "Cascaded_Tanks": ("V", 1.0, "V"),
+    "WienerHammerBenchMark": ("mV", 1000.0, "V"),
 }
 
 # Where the download folder of `nonlinear-benchmarks` keeps each benchmark's files.
@@ -122,10 +122,10 @@ class Benchmark:
     """A benchmark's official split and its scoring convention.
 
     Fields: `name`; `sampling_time` (s); `unit` of the reported RMSE and `unit_factor`
-    (file's `y` times `unit_factor` is in `unit`); `n_init`, the state-initialisation window
-    of every test record in the loader version `loader`; `train` and `test`, tuples of
-    `BenchmarkRecord`; `published`, test record name -> {method: RMSE in `unit`} from
-    Champneys et al. (2024) (empty where no table is kept).
+    (file's `y`, in `file_unit`, times `unit_factor` is in `unit`); `n_init`, the state-
+    initialisation window of every test record in the loader version `loader`; `train`
+    and `test`, tuples of `BenchmarkRecord`; `published`, test record name -> {method:
+    RMSE in `unit`} from Champneys et al. (2024) (empty where no table is kept).
     """
 
     name: str
@@ -137,6 +137,7 @@ class Benchmark:
     train: tuple[BenchmarkRecord, ...]
     test: tuple[BenchmarkRecord, ...]
     published: dict[str, dict[str, float]]
+    file_unit: str = ""
 
     def best_linear(self, test_name: str) -> float | None:
         """The smaller published linear RMSE (state space or ARX) on `test_name`, or None."""
@@ -163,7 +164,7 @@ def benchmark_data(name: str, root: str | os.PathLike, *, loader: str = "1.0.1")
     sampling_time, train, test = _READERS[name](_Files(name, root))
     for record in (*train, *test):
         _check_lengths(name, record, n_init)
-    unit, unit_factor = _UNITS[name]
+    unit, unit_factor, file_unit = _UNITS[name]
     published = {
         test_name: dict(zip(_METHODS, (float(v) for v in values), strict=True))
         for (bench, test_name), values in _TABLE.items()
@@ -174,6 +175,7 @@ def benchmark_data(name: str, root: str | os.PathLike, *, loader: str = "1.0.1")
         sampling_time=float(sampling_time),
         unit=unit,
         unit_factor=unit_factor,
+        file_unit=file_unit,
         n_init=n_init,
         loader=loader,
         train=tuple(train),

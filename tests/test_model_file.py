@@ -205,3 +205,26 @@ def test_simulate_reproduces_the_ced_test_figures(tmp_path):
         for key in ("error", "error_from_rest"):
             assert row[key] == pytest.approx(expected[key], rel=1e-9), key
         assert row["rmse"] == pytest.approx(bench["test_rmse"], rel=1e-9)
+
+
+def test_the_loop_report_draws_every_record_in_its_unit_against_seconds(loop):
+    # issue 38.5: estimation, validation and test records, each measured against the
+    # final model in the record's unit (mm) against time in seconds, listed in report.md
+    folder, _, _ = loop
+    report = folder / "report"
+    figures = sorted((report / "records").glob("*.png"))
+    assert [f.name for f in figures] == ["00-estimation.png", "01-validation.png", "02-test.png"]
+    text = (report / "report.md").read_text()
+    for figure in figures:
+        assert f"(records/{figure.name})" in text and figure.stat().st_size > 0
+    rows = [line for line in text.splitlines() if line.startswith("- ") and " mm, " in line]
+    assert len(rows) == 3 and all("period 0.01 s" in row for row in rows)
+    # the figure's axes: the unit and seconds
+    from jaxcascade._plot._comparison import plot_comparison
+
+    saved = jc.load_model(report / "model.json")
+    frame = pd.read_csv(folder / "test.csv")
+    comparison = saved.compare(saved.record(frame["u"].to_numpy(), frame["y"].to_numpy()))
+    (ax,) = plot_comparison(comparison, report / "check.png", units="mm").axes
+    assert ax.get_xlabel() == "time (s)" and ax.get_ylabel() == "mm"
+    assert ax.get_xlim()[1] == pytest.approx(299 * PERIOD, rel=0.1)

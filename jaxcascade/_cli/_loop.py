@@ -298,6 +298,7 @@ def _run_loop(args, checkpoints) -> int:
         if args.integrate == "yes" or pole is not None:
             integrating = {"largest_arx_pole": pole, "option": args.integrate}
     scored_records = (validation, tests)
+    estimation = list(training)  # as measured (the loop may model their difference)
     if integrating is not None:
         from .._integrating import differenced
 
@@ -443,16 +444,20 @@ def _run_loop(args, checkpoints) -> int:
     if folder is not None:
         command = "jaxcascade loop " + " ".join(sys.argv[2:])
         (folder / "report.json").write_text(strict_json(full, indent=1))
-        (folder / "report.md").write_text(_markdown(full, command))
         from .._model_file import SavedModel  # the final model, for `jaxcascade simulate`
 
-        SavedModel.from_record(
+        saved = SavedModel.from_record(
             result.final,
             training[0],
             init_samples=args.init_samples,
             integrating=integrating is not None,
             provenance={"command": command, "declared": full["structure_before"]},
-        ).save(folder / "model.json")
+        )
+        saved.save(folder / "model.json")
+        roles = [("estimation", r) for r in estimation] + [("validation", scored_records[0])]
+        roles += [("test", r) for r in scored_records[1]]
+        figures = _record_figures(saved, roles, folder, args.init_samples)
+        (folder / "report.md").write_text(_markdown(full, command) + figures)
         import pandas as pd
 
         pd.DataFrame(full["candidates"]).to_csv(folder / "candidates.csv", index=False)
@@ -490,6 +495,39 @@ def _run_loop(args, checkpoints) -> int:
     for sentence in warnings:
         print(sentence, file=sys.stderr if args.json else sys.stdout)
     return 0
+
+
+def _record_figures(saved, roles, folder, init_samples) -> str:
+    """One figure per record, `records/<k>-<role>.png`: measured against the final model
+    (initialised on the `init_samples` samples before its scored part, and from rest) in
+    the record's unit against time in seconds, with fit %, NRMSE and RMSE in the unit
+    (`_model_file.SavedModel.compare`, `_plot._comparison`); returns the report's section
+    that shows them."""
+    from .._plot._comparison import plot_comparison
+
+    (folder / "records").mkdir(exist_ok=True)
+    lines = [
+        "",
+        "## Every record: measured against the final model",
+        "",
+        "In the record's unit against time in seconds; the state set on the shaded "
+        "samples, then simulated (`initialised`), and simulated from rest.",
+        "",
+    ]
+    for k, (role, record) in enumerate(roles):
+        c = saved.compare(record, init_samples)
+        unit = record.output_unit or record.output_column
+        name = f"records/{k:02d}-{role}.png"
+        title = f"{role} record {_name(record)}: measured vs the final model"
+        plot_comparison(c, folder / name, title=title, units=unit)
+        s = c.score
+        lines.append(
+            f"- {role}, {_name(record)}: NRMSE {s.error:.4g} initialised ({s.error_from_rest:.4g} "
+            f"from rest), RMSE {s.rmse:.4g} {unit}, period "
+            + (f"{record.sample_period:g} s" if record.sample_period else "unknown (samples)")
+            + f"  \n  ![{role} {_name(record)}]({name})"
+        )
+    return "\n".join(lines) + "\n"
 
 
 def _benchmark_summary(bench, scores, scaling, args) -> dict:
@@ -625,6 +663,7 @@ def _benchmark_records(args, orders):
             source=f"{bench.name} {name}",
             input_column=args.input or "u",
             output_column=args.output or "y",
+            output_unit=bench.file_unit,
         )
 
     training = [build(*part) for part in parts["estimation"]]

@@ -8,10 +8,11 @@ import numpy as np
 from .._metrics import fit_percent
 
 
-def plot_comparison(comparison, path, *, title: str = "", units: str = "output") -> None:
+def plot_comparison(comparison, path, *, title: str = "", units: str = "output"):
     """Measured output, the initialised simulation (its state set on the shaded samples)
     and the simulation from rest of one `_model_file.Comparison`, against time in
-    seconds (in samples where the record's period is unknown: `seconds` False)."""
+    seconds (in samples where the record's period is unknown: `seconds` False). Returns
+    the `Figure`."""
     from matplotlib.figure import Figure
 
     c, s = comparison, comparison.score
@@ -40,3 +41,4 @@ def plot_comparison(comparison, path, *, title: str = "", units: str = "output")
     ax.set_xlabel("time (s)" if c.seconds else "sample")
     figure.suptitle(title)
     figure.savefig(path, dpi=110)
+    return figure
