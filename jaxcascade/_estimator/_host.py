@@ -89,9 +89,12 @@ class HostEstimator:
 
 @jax.jit
 def _claim(params, residual, u, y):
+    from .._sensitivity import output_jacobian
+
     inside = is_admissible(params, jnp.min(u), jnp.max(u))
     status = jnp.where(inside, Status.converged, Status.left_domain)
-    return claim(status, params, residual, u, y, ROBUST["threshold"])
+    _, jacobian = output_jacobian(params, u)
+    return claim(status, params, residual, u, y, ROBUST["threshold"], jacobian=jacobian)
 
 
 class HostFit:

@@ -84,6 +84,7 @@ from jaxtyping import Array, Float, PRNGKeyArray
 from .._compile import jit
 from .._model import CascadeParams, Orders, is_admissible
 from .._prior import random_systems
+from .._sensitivity import output_jacobian
 from .._status import Status
 from .._validate import record
 from ._base import Estimator, keyword_defaults, setting
@@ -260,8 +261,8 @@ def _core(
     inside = is_admissible(solution.params, jnp.min(u), jnp.max(u))
     status = jnp.where(inside | _failed(solution.status), solution.status, Status.left_domain)
     # nor where the data do not say it is their estimate (step 5, `_basin.claim`)
-    residual = simulation_error(solution.params, u, y)
-    status = claim(status, solution.params, residual, u, y, threshold)
+    simulated, jacobian = output_jacobian(solution.params, u)
+    status = claim(status, solution.params, simulated - y, u, y, threshold, jacobian=jacobian)
     return eqx.tree_at(lambda s: s.status, solution, status.astype(solution.status.dtype))
 
 
