@@ -769,10 +769,8 @@ def add_parser(subparsers) -> None:
         epilog=examples(
             "jaxcascade loop train.csv --validate valid.csv --input u --output y "
             "--time t --decimate 4 --report results/loop",
-            "jaxcascade loop a.csv b.parquet --validate c.csv --input u --output y "
-            "--decimate 8 --window 3072:7680 --json",
-            "jaxcascade loop a.csv --validate b.csv --test c.csv --test-window 6144:14336 "
-            "--input u --output y --init-samples 50 --report results/loop",
+            "jaxcascade loop a.csv b.parquet --validate c.csv --window 3072:7680 --test d.csv "
+            "--test-window 6144:14336 --input u --output y --decimate 8 --json",
             "jaxcascade loop --benchmark CED --data ../shared/data/nonlinear_benchmarks "
             "--report results/ced --json",
             "jaxcascade loop train.csv --validate valid.csv --input u --output y "
