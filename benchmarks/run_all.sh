@@ -1,15 +1,27 @@
 #!/usr/bin/env bash
 # Regenerate results/ with the committed commands, one after another (never two
 # benchmarks at once: timings would be wrong; `loop` and `stability` run two of their
-# loops at once, as their committed tables were made). The whole run has not been
+# loops at once, as their committed tables were made). Every command of
+# results/README.md's table is here, in the step its row names
+# (tests/test_results_listing.py checks both ways). The whole run has not been
 # timed (on 2 cores `stability` alone took about 25 minutes: the wall times in
 # results/brfd_stability/resources.csv, two at a time).
 #   bash benchmarks/run_all.sh            # every step (the list is printed first)
 #   bash benchmarks/run_all.sh sweeps     # only the named steps
 #   bash benchmarks/run_all.sh list       # the steps and their commands, nothing run
+# The steps in `needs_shared_data` read the shared measured records: ../shared/data/brfd
+# (or $BRFD_DATA) and, for `nonlinear`, ../shared/data/nonlinear_benchmarks (or
+# $NLB_DATA); where a selected step's folder is missing, nothing is run.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 export JAXCASCADE_CACHE=${JAXCASCADE_CACHE:-off}   # compile times reported cold
+needs_shared_data=(loop stability backlash inputs nonlinear)
+shared_data() {  # the shared folder a step reads
+    case $1 in
+        nonlinear) echo "${NLB_DATA:-../shared/data/nonlinear_benchmarks}" ;;
+        *) echo "${BRFD_DATA:-../shared/data/brfd}" ;;
+    esac
+}
 
 bench() {  # issue 6: throughput vs NumPy/SciPy and the FLOP floor; scaling
     jaxcascade bench --out results/bench.csv --json > results/bench.json
@@ -61,21 +73,27 @@ efficiency() {  # issue 13: literal and robust against the Cramer-Rao bound
     rm -rf results/efficiency
     python benchmarks/efficiency.py --realisations 100 --out results/efficiency
 }
-loop() {  # issue 5: undeclared effects, and the measured friction-damper records
-    python benchmarks/effects_loop.py --out results/effects_loop
+effects_loop() {  # issue 5: the loop on records with one undeclared effect each
+    python benchmarks/effects_loop.py --out results/effects_loop --seed 1
+}
+loop() {  # issue 21 (needs ../shared/data): the loop on the measured friction-damper
+    # records; brfd.py runs every loop again, so old reports go first
+    rm -rf results/brfd
     python benchmarks/brfd.py --data "${BRFD_DATA:-../shared/data/brfd}" --out results/brfd --decimate 16 \
         --init-samples 50 --max-effects 2 --all-records --jobs 2 \
         --effects backlash_friction,backlash_friction_contacts,slack_friction,prandtl_ishlinskii,dahl_friction,output_offset,colored_noise
 }
-stability() {  # issue 21, point 3: the loop's decision with retries 0/2 x seeds 0-2, both
-    # directions, and the four main runs again; two loops at a time (--jobs 2: their wall
-    # times in resources.csv overlap)
+stability() {  # issue 21, point 3 (needs ../shared/data): the loop's decision with
+    # retries 0/2 x seeds 0-2, both directions, and the four main runs again; two loops at
+    # a time (--jobs 2: their wall times in resources.csv overlap); old reports go first
+    rm -rf results/brfd_stability
     python benchmarks/brfd.py --data "${BRFD_DATA:-../shared/data/brfd}" --out results/brfd_stability \
         --decimate 16 --init-samples 50 --max-effects 2 --stability --jobs 2 \
         --effects backlash_friction,backlash_friction_contacts,slack_friction,prandtl_ishlinskii,dahl_friction,output_offset,colored_noise
 }
-backlash() {  # issues 15 and 21: each hysteresis effect alone on the damper (effects.md);
-    # the fitted backlash_friction initialised from 50/20/100 samples (initial_state.md)
+backlash() {  # issues 15 and 21 (needs ../shared/data): each hysteresis effect alone on
+    # the damper (effects.md); the fitted backlash_friction initialised from 50/20/100
+    # samples (initial_state.md)
     python benchmarks/brfd_effect.py --data "${BRFD_DATA:-../shared/data/brfd}" --decimate 16 \
         --effects backlash_friction,backlash_friction_contacts,slack_friction,prandtl_ishlinskii,dahl_friction \
         --out results/brfd_backlash/effects.md
@@ -95,21 +113,21 @@ recursive() {  # issue 25: the recursive estimator: speed, noise-free, vs batch,
     python benchmarks/recursive_vs_batch.py --seed 1000 --out results/recursive_vs_batch
     python benchmarks/recursive_tracking.py --out results/recursive_tracking
 }
-inputs() {  # issue 24: input designs at equal power (reads the shared damper record);
-    # the script resumes from its per-cell tables, so old tables go first
+inputs() {  # issue 24 (needs ../shared/data): input designs at equal power (the file
+    # input is the shared damper's Kocaeli displacement); the script resumes from its
+    # per-cell tables, so old tables go first
     rm -rf results/input_design
     python benchmarks/input_design.py --realisations 200 --data "${BRFD_DATA:-../shared/data/brfd}" \
         --out results/input_design
 }
-
 noise() {  # issue 24: pem under AR(1) noise drawn by the script; the noise study
     python benchmarks/pem_coloured.py --realisations 200 --estimators pem,robust \
         --out results/pem_coloured
     rm -rf results/noise_study   # per-cell tables: the script resumes from them
     python benchmarks/noise_study.py --realisations 200 --out results/noise_study
 }
-nonlinear() {  # issue 32: the loop on the community's nonlinear benchmarks (reads the
-    # shared MAT files); the script skips finished runs, so old reports go first
+nonlinear() {  # issue 32 (needs ../shared/data): the loop on the community's nonlinear
+    # benchmarks (the shared MAT files); the script skips finished runs, so old reports go first
     rm -rf results/nonlinear_benchmarks
     python benchmarks/nonlinear_benchmarks.py --data "${NLB_DATA:-../shared/data/nonlinear_benchmarks}" \
         --out results/nonlinear_benchmarks
@@ -118,16 +136,28 @@ statuses() {  # issue 35: every estimator's statuses against the truth
     python benchmarks/status_honesty.py --realisations 100 --seed 0
 }
 
-all=(bench profile bench_robust distributed robust sweeps literal efficiency loop stability backlash
-    reproduce recursive inputs noise nonlinear statuses)
+all=(bench profile bench_robust distributed robust sweeps literal efficiency effects_loop loop
+    stability backlash reproduce recursive inputs noise nonlinear statuses)
+needs() {  # whether step $1 reads ../shared/data
+    local s
+    for s in "${needs_shared_data[@]}"; do [ "$s" = "$1" ] && return 0; done
+    return 1
+}
 steps=("$@")
 if [ "${steps[*]}" = list ]; then
-    for step in "${all[@]}"; do declare -f "$step"; done
+    for step in "${all[@]}"; do
+        if needs "$step"; then echo "# $step: needs $(shared_data "$step")"; fi
+        declare -f "$step"
+    done
     exit 0
 fi
 [ ${#steps[@]} -gt 0 ] || steps=("${all[@]}")
 for step in "${steps[@]}"; do
     declare -F "$step" > /dev/null || { echo "run_all.sh: no step '$step' (steps: ${all[*]})" >&2; exit 2; }
+    if needs "$step" && [ ! -d "$(shared_data "$step")" ]; then
+        echo "run_all.sh: step '$step' needs $(shared_data "$step") (../shared/data); nothing run" >&2
+        exit 2
+    fi
 done
 echo "run_all.sh: ${steps[*]}"
 for step in "${steps[@]}"; do
