@@ -219,7 +219,9 @@ def test_the_pattern_rules():
     assert pattern_regex("sweep_example2_paper.*").fullmatch("sweep_example2_paper.summary.csv")
     assert not pattern_regex("bench.csv").fullmatch("bench_csv")
     sweep = parse_command("jaxcascade sweep --example $ex --out r/s$ex.parquet --json > o.json")
-    assert sweep == parse_command("jaxcascade sweep --json --out r/s<E>.parquet --example <E> >o.json")
+    assert sweep == parse_command(
+        "jaxcascade sweep --json --out r/s<E>.parquet --example <E> >o.json"
+    )
     shared = parse_command('PYTHONPATH=. python benchmarks/b.py "${D:-../shared/x}" --q')
     assert shared == ("benchmarks/b.py", ("../shared/x",), (("--q", True),), None)
 
@@ -245,7 +247,9 @@ def test_every_listed_file_exists():
 
 
 def test_every_file_is_listed():
-    regexes = [pattern_regex(x) for row in ROWS for item in row["files"] for x in expand_braces(item)]
+    regexes = [
+        pattern_regex(x) for row in ROWS for item in row["files"] for x in expand_braces(item)
+    ]
     unlisted = [f for f in tracked() if not any(r.fullmatch(f) for r in regexes)]
     assert not unlisted, (
         f"{len(unlisted)} files under results/ match no row of results/README.md's table "
