@@ -26,6 +26,7 @@ import numpy as np
 import pandas as pd
 import scipy.signal
 
+from . import _defaults
 from ._validate import MAX_MAGNITUDE
 
 _FORMATS = {
@@ -331,11 +332,11 @@ def read_record(
     time_column: str | int | None = None,
     format: str | None = None,
     sample_period: float | None = None,
-    decimate: int = 1,
+    decimate: int = _defaults.DECIMATE,
     anti_alias: str = "fir",
-    scaling: str | Scaling = "standard",
+    scaling: str | Scaling = _defaults.SCALING,
     orders=None,
-    detrend: str = "none",
+    detrend: str = _defaults.DETREND,
     input_unit: str | None = None,
     output_unit: str | None = None,
 ) -> Record:
@@ -363,9 +364,9 @@ def read_record(
       `resample_poly` with odd-symmetric edge padding so the ends are not pulled to zero)
       or `"iir"` (`scipy.signal.decimate`'s order-8 Chebyshev I run forward and backward,
       in steps of at most 13).
-    - `scaling`: `"standard"`, `"scale"`, `"auto"`, `"none"` (see `Scaling.from_data`, computed
-      after decimation), or a `Scaling` to reuse, e.g. the estimation record's for a
-      validation record.
+    - `scaling`: `"auto"` (the default for measured data, `_defaults`), `"standard"`,
+      `"scale"`, `"none"` (see `Scaling.from_data`, computed after decimation), or a
+      `Scaling` to reuse, e.g. the estimation record's for a validation record.
     - `orders`: an `Orders`; the record must hold at least `orders.min_samples` samples.
     - `input_unit`, `output_unit`: physical units, kept on the `Record`.
 
@@ -472,7 +473,7 @@ def read_column(
     column: str,
     *,
     format: str | None = None,
-    decimate: int = 1,
+    decimate: int = _defaults.DECIMATE,
     anti_alias: str = "fir",
 ) -> np.ndarray:
     """One numeric column of a CSV/TSV, Parquet or MAT file (a header, a 0-based column
@@ -502,14 +503,14 @@ def record_from_arrays(
     *,
     time=None,
     sample_period: float | None = None,
-    decimate: int = 1,
+    decimate: int = _defaults.DECIMATE,
     anti_alias: str = "fir",
-    scaling: str | Scaling = "standard",
+    scaling: str | Scaling = _defaults.SCALING,
     orders=None,
     source: str | None = None,
     input_column: str = "u",
     output_column: str = "y",
-    detrend: str = "none",
+    detrend: str = _defaults.DETREND,
     input_unit: str | None = None,
     output_unit: str | None = None,
 ) -> Record:
@@ -982,7 +983,7 @@ def _build(
     anti_alias: str,
     scaling: str | Scaling,
     orders,
-    detrend: str = "none",
+    detrend: str = _defaults.DETREND,
     input_unit: str | None = None,
     output_unit: str | None = None,
     file_start: int = 0,

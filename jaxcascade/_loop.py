@@ -359,30 +359,49 @@ def evaluate(
     """The model on the validation record. With `init_samples = n > 0` the model's
     state is set from the measured output on the first `n` samples (`initialised_output`)
     and everything is judged on the samples after them (the window: its state set on the
-    `n` samples before it); from rest otherwise. `simulated` is the from-rest output."""
-    y_sim, x, y_cascade = _simulate(model, u)
-    u, y = np.asarray(u), np.asarray(y)
-    p = model.params
-    previous = np.concatenate([np.zeros(1, y_cascade.dtype), y_cascade[:-1]])
-    g1, g2 = backlash_switches(x, previous, float(p.cL), float(p.mR), float(p.cR))
-    regime = regime_from_switches(np.asarray(g1), np.asarray(g2))
+    `n` samples before it); from rest otherwise. `simulated` is the from-rest output.
+
+    `u`, `y` may be lists of several validation records: each is simulated and
+    initialised on its own, and the scored parts are joined end to end for the pooled
+    NRMSE (normalised by the variance of the joined output), the residual tests (whose
+    correlations then also span the joins: `max_lag` of the record's total length) and
+    the significance test; `window` then applies to none (a `ValueError` otherwise).
+    One record is judged exactly as before."""
+    us, ys = _records(u, y)
+    if len(us) > 1 and window is not None:
+        raise ValueError("evaluate: a window applies to one validation record, not several.")
     n = int(init_samples)
-    if n > 0:
-        scored = initialised_output(model, u, y, n, n)
+    parts = []
+    for u_r, y_r in zip(us, ys, strict=True):
+        y_sim, x, y_cascade = _simulate(model, u_r)
+        u_r, y_r = np.asarray(u_r), np.asarray(y_r)
+        p = model.params
+        previous = np.concatenate([np.zeros(1, y_cascade.dtype), y_cascade[:-1]])
+        g1, g2 = backlash_switches(x, previous, float(p.cL), float(p.mR), float(p.cR))
+        regime = regime_from_switches(np.asarray(g1), np.asarray(g2))
         window_sim = None
-        if window is not None:
-            start, stop = window
-            window_sim = initialised_output(model, u, y, start, n)[: stop - start]
-    else:
-        scored, window_sim = y_sim, None if window is None else y_sim[slice(*window)]
-    residual = y[n:] - scored
-    innovations = innovations_np(model.noise, residual)
-    error = score(y[n:], scored)
+        if n > 0:
+            scored = initialised_output(model, u_r, y_r, n, n)
+            if window is not None:
+                start, stop = window
+                window_sim = initialised_output(model, u_r, y_r, start, n)[: stop - start]
+        else:
+            scored = y_sim
+            window_sim = None if window is None else y_sim[slice(*window)]
+        residual = y_r[n:] - scored
+        parts.append((u_r[n:], y_r[n:], residual, regime[n:], y_sim, window_sim, scored))
+    join = (lambda arrays: arrays[0]) if len(parts) == 1 else np.concatenate
+    u_s, y_s, residual, regime, y_sim = (join([q[k] for q in parts]) for k in range(5))
+    scored = join([q[6] for q in parts])
+    innovations = join([innovations_np(model.noise, q[2]) for q in parts])
+    error = score(y_s, scored)
     tests = residual_tests(
-        u[n:], innovations, regime[n:], sample_period=sample_period, **test_sizes(len(residual))
+        u_s, innovations, regime, sample_period=sample_period, **test_sizes(len(residual))
     )
-    window_error = None if window is None else score(y[slice(*window)], window_sim)
-    prediction_error = score(y[n:], y[n:] - innovations)
+    window_error = None
+    if window is not None:
+        window_error = score(np.asarray(ys[0])[slice(*window)], parts[0][5])
+    prediction_error = score(y_s, y_s - innovations)
     return Evaluation(residual, y_sim, error, tests, window_error, innovations, prediction_error)
 
 
@@ -561,7 +580,8 @@ def model_error_loop(
       simulated, not fitted); a `ValueError` otherwise. `u_est`,
       `y_est` may be lists of several estimation records, estimated jointly (each
       simulated from its own initial state; the declared cascade's first fit is on the
-      records joined end to end, then refined on each).
+      records joined end to end, then refined on each). `u_val`, `y_val` may be lists
+      of several validation records, each scored on its own and pooled (`evaluate`).
     - `orders`: declared orders of the cascade.
     - `base`: a fitted cascade to start from; by default the robust estimator fits one.
     - `t_threshold`, `min_gain`: a candidate is significant when its Diebold-Mariano
@@ -599,9 +619,35 @@ def model_error_loop(
     ]
     us, ys = tuple(p[0] for p in pairs), tuple(p[1] for p in pairs)
     check_lengths([int(u.shape[0]) for u in us], orders, where="model_error_loop")
-    u_val, y_val = record(u_val, y_val, where="model_error_loop (validation)")
-    check_scored_length(int(u_val.shape[0]), init_samples, "model_error_loop (validation)")
-    u_val_np, y_val_np = np.asarray(u_val, float), np.asarray(y_val, float)
+    u_vals, y_vals = _records(u_val, y_val)
+    if len(u_vals) != len(y_vals):
+        raise ValueError(
+            f"model_error_loop: {len(u_vals)} validation inputs but {len(y_vals)} outputs."
+        )
+    several = len(u_vals) > 1
+    checked = [
+        record(
+            u,
+            y,
+            where=f"model_error_loop (validation record {i + 1})"
+            if several
+            else "model_error_loop (validation)",
+        )
+        for i, (u, y) in enumerate(zip(u_vals, y_vals, strict=True))
+    ]
+    for i, (u, _) in enumerate(checked):
+        where = f"validation record {i + 1}" if several else "validation"
+        check_scored_length(int(u.shape[0]), init_samples, f"model_error_loop ({where})")
+    if several and window is not None:
+        raise ValueError(
+            "model_error_loop: a window applies to one validation record, not several."
+        )
+    u_val_np = [np.asarray(u, float) for u, _ in checked]
+    y_val_np = [np.asarray(y, float) for _, y in checked]
+    if not several:
+        u_val_np, y_val_np = u_val_np[0], y_val_np[0]
+    # the scored samples of every validation record, joined (the pooled NRMSE's scale)
+    scored_val = np.concatenate([y[int(init_samples) :] for _, y in checked])
 
     def assess(model):
         return evaluate(model, u_val_np, y_val_np, sample_period, window, init_samples)
@@ -622,7 +668,9 @@ def model_error_loop(
         "key": None if key is None else _key_data(key),
         "records": len(us),
     }
-    found = store.start(identity([*us, *ys, u_val, y_val], options))
+    if several:  # a single record's identity as before (its checkpoints stay valid)
+        options["validation_records"] = len(checked)
+    found = store.start(identity([*us, *ys, *(a for pair in checked for a in pair)], options))
     if found:
         say(f"resuming from '{store.folder}': {found} finished fit(s) and round(s) kept there")
     stored = store.load("declared")
@@ -691,7 +739,7 @@ def model_error_loop(
         judged_by = {
             "t_threshold": t_threshold,
             "min_gain": min_gain,
-            "validation_scale": float(np.var(y_val_np[int(init_samples) :])),
+            "validation_scale": float(np.var(scored_val)),
         }
         todo = [(n, "add") for n in tried] + [(n, "replace") for n in replacing]
         noise_tried = ARNoise.name in names and ARNoise.name not in added

@@ -46,15 +46,25 @@ def record(u, y=None, *, orders: Orders | None = None, where: str = "the record"
             f"{where}: orders must be an Orders, e.g. Orders(2, 2, 2, 2) or "
             f"Orders.parse('2,2,2,2'), got {type(orders).__name__} {orders!r}."
         )
-    u = _array(u, "u", where, cast)
+    lost = []  # the float64 arrays computed in float32 (float64 off): one warning
+    u = _array(u, "u", where, cast, lost)
     if y is not None:
-        y = _array(y, "y", where, cast)
+        y = _array(y, "y", where, cast, lost)
         if y.shape != u.shape:
             raise ValueError(
                 f"{where}: u and y must have the same length, got {u.shape[0]} and "
                 f"{y.shape[0]} samples; pass the input and output of one record."
             )
         y = y.astype(u.dtype)
+    if lost:
+        warnings.warn(
+            f"{where}: {' and '.join(lost)} {'is' if len(lost) == 1 else 'are'} float64 but "
+            "JAX's float64 is off, so the record is computed in float32 (about 7 "
+            "significant digits); enable float64 first with "
+            "jax.config.update('jax_enable_x64', True).",
+            UserWarning,
+            stacklevel=3,
+        )
     if orders is not None and u.shape[0] < orders.min_samples:
         raise ValueError(
             f"{where}: the record has {u.shape[0]} samples, fewer than the "
@@ -64,7 +74,7 @@ def record(u, y=None, *, orders: Orders | None = None, where: str = "the record"
     return u, y
 
 
-def _array(value, name: str, where: str, cast: bool):
+def _array(value, name: str, where: str, cast: bool, lost: list):
     if not is_traced(value) and not isinstance(value, jax.Array | np.ndarray):
         try:
             value = np.asarray(value)
@@ -90,13 +100,7 @@ def _array(value, name: str, where: str, cast: bool):
     if is_traced(value):
         return value.astype(target)
     if dtype == np.float64 and np.dtype(target) == np.float32:
-        warnings.warn(
-            f"{where}: {name} is float64 but JAX's float64 is off, so it is computed in "
-            "float32 (about 7 significant digits); enable float64 first with "
-            "jax.config.update('jax_enable_x64', True).",
-            UserWarning,
-            stacklevel=4,
-        )
+        lost.append(name)
     host = np.asarray(value)
     finite = np.isfinite(host)
     if not finite.all():

@@ -112,7 +112,7 @@ def test_loop_on_ced_scores_every_test_set_in_its_unit(capsys, tmp_path):
     full = json.loads((tmp_path / "report.json").read_text())
     estimation = [r["source"] for r in full["records"]["estimation"]]
     assert estimation == ["CED train 1", "CED train 2 [0:300]"]
-    assert full["records"]["validation"]["source"] == "CED train 2 [300:400]"
+    assert [v["source"] for v in full["records"]["validation"]] == ["CED train 2 [300:400]"]
     assert all(r["sample_period"] == 0.02 for r in full["records"]["test"])
     report = (tmp_path / "report.md").read_text()
     first = report.split("\n## ", 2)[1]

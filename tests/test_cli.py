@@ -94,19 +94,23 @@ def test_fit_json_on_a_simulated_record(capsys, tmp_path):
     assert main(["fit", str(path), "--input", "u", "--output", "y", "--json"]) == 0
     result = json.loads(capsys.readouterr().out)
     keys = {"estimator", "status", "message", "estimates", "std_errors", "nrmse", "iterations"}
+    # fitted in model units (the measured-data default `--scaling auto`), mapped back
+    keys |= {"estimates_physical", "std_errors_physical", "scaling"}
     assert set(result) == keys | {"not_identifiable"}
     assert result["estimator"] == "robust" and result["status"] == "converged"
+    assert result["scaling"]["method"] == "scale"  # the input crosses zero: not centred
     assert result["not_identifiable"] == {}  # the input covers every breakpoint
     # SNR 50: the noise floor of the NRMSE is 1/50; a correct fit sits near it.
     assert result["nrmse"] < 1.3 / 50
     truth = ex.params().to_dict()
-    assert max(abs(result["estimates"][k] - v) for k, v in truth.items()) < 0.05
+    estimates = result["estimates_physical"]
+    assert max(abs(estimates[k] - v) for k, v in truth.items()) < 0.05
     # a standard error beside every estimate, of the size of the estimation error: at
     # SNR 50 and N 1500 between 1e-4 and 1e-2, and no error beyond 6 of them
-    errors = result["std_errors"]
+    errors = result["std_errors_physical"]
     assert set(errors) == set(truth)
     assert all(1e-4 < errors[k] < 1e-2 for k in truth)
-    assert max(abs(result["estimates"][k] - v) / errors[k] for k, v in truth.items()) < 6
+    assert max(abs(estimates[k] - v) / errors[k] for k, v in truth.items()) < 6
 
 
 def test_fit_says_which_parameters_the_record_does_not_determine(capsys, tmp_path):
@@ -122,7 +126,8 @@ def test_fit_says_which_parameters_the_record_does_not_determine(capsys, tmp_pat
     y, _ = jc.measure(key_e, ex.params(), u, 50.0)
     path = tmp_path / "record.csv"
     pd.DataFrame({"u": np.asarray(u), "y": np.asarray(y)}).to_csv(path, index=False)
-    argv = ["fit", str(path), "--input", "u", "--output", "y"]
+    # in the paper's units, where Example 1's breakpoints lie outside the input's range
+    argv = ["fit", str(path), "--input", "u", "--output", "y", "--scaling", "none"]
     # `on_edge` (DL1 at the end of the range), the parameters named, the others stand
     assert main([*argv, "--json"]) == 0
     result = json.loads(capsys.readouterr().out)

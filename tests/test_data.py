@@ -56,7 +56,7 @@ def test_round_trip(tmp_path, suffix):
 def test_standard_scaling_is_recorded_and_inverts(tmp_path):
     frame = _frame()
     path = _write(frame, tmp_path / "record.csv")
-    record = read_record(path, "u", "y")  # standard scaling by default
+    record = read_record(path, "u", "y", scaling="standard")
     assert abs(record.u.mean()) < 1e-12 and record.u.std() == pytest.approx(1.0)
     assert abs(record.y.mean()) < 1e-12 and record.y.std() == pytest.approx(1.0)
     assert record.scaling.y_offset == pytest.approx(frame["y"].mean())

@@ -10,7 +10,17 @@ PACKAGE = pathlib.Path(__file__).parents[1] / "jaxcascade"
 
 # Lowest first, as in docs/architecture.md; a package (folder) is one room.
 LAYERS = [
-    {"_model", "_status", "_metrics", "_batching", "_version", "_linalg", "_compile", "_names"},
+    {
+        "_model",
+        "_status",
+        "_metrics",
+        "_batching",
+        "_version",
+        "_linalg",
+        "_compile",
+        "_names",
+        "_defaults",
+    },
     {"_validate"},
     {"_simulate", "_prior", "_examples", "_changing", "_disturbance", "_noise_filter"},
     {"_sensitivity"},

@@ -234,7 +234,8 @@ def test_ts_units_and_detrend_options():
     assert _record_stage([spec, "--ts", "0.02", "--decimate", "2"]).sample_period == 0.04
     u, y = stored["u11"][100:400, 0], stored["z11"][100:400, 0]
     for option, kind in (("mean", "constant"), ("linear", "linear")):
-        record = _record_stage([spec, "--detrend", option])
+        # in the file's units (the measured-data default `--scaling auto` would scale them)
+        record = _record_stage([spec, "--detrend", option, "--scaling", "none"])
         # scipy's detrend is MATLAB's; the two agree to rounding
         np.testing.assert_allclose(record.u, scipy.signal.detrend(u, type=kind), atol=1e-12)
         np.testing.assert_allclose(record.y, scipy.signal.detrend(y, type=kind), atol=1e-12)
@@ -286,8 +287,13 @@ def test_loop_reads_ced_by_specs_without_input_and_output(capsys):
     argv = ["loop", spec("u11,z11", "0:400"), spec("u12,z12", "0:300")]
     argv += ["--validate", spec("u12,z12", "300:400")]
     argv += ["--test", spec("u11,z11", "400:500"), spec("u12,z12", "400:500"), "--ts", "0.02"]
-    training, validation, tests = _file_records(build_parser().parse_args(argv), None)
-    assert [len(r) for r in training] == [400, 300] and len(validation) == 100
+    argv += ["--validate", spec("u11,z11", "400:500")]  # a second validation record
+    training, validations, tests = _file_records(build_parser().parse_args(argv), None)
+    assert [len(r) for r in training] == [400, 300] and [len(v) for v in validations] == [
+        100,
+        100,
+    ]
+    validation = validations[0]
     assert [r.source for r in tests] == [spec("u11,z11", "400:500"), spec("u12,z12", "400:500")]
     assert all(r.sample_period == 0.02 for r in [*training, validation, *tests])
     # one scaling, the estimation records' together
@@ -326,6 +332,7 @@ def test_fit_on_a_range_of_a_mat_file(capsys, tmp_path):
     yy = np.concatenate([other_y, y])[:, None]  # a 2000 x 1 column
     scipy.io.savemat(path, {"uu": uu, "yy": yy})
     argv = ["fit", f"{path}:uu,yy:500:", "--ts", "0.001", "--estimator", "literal", "--json"]
+    argv += ["--scaling", "none"]  # the paper's units, where the paper's iteration starts
     assert main(argv) == 0
     result = json.loads(capsys.readouterr().out)
     assert result["status"] in ("converged", "cycled") and result["nrmse"] < 1.3 / 50

@@ -77,25 +77,35 @@ def add_signal_arguments(parser, *, required: bool = False) -> None:
     )
 
 
-def add_record_arguments(parser, *, scaling: str, required: bool = False) -> None:
-    """Options shared by the commands that read a measured record (`fit`, `loop`); their
-    records are record specs (`RECORD_SPEC`), read by `read_record(spec,
-    **record_options(args))`."""
+def add_record_arguments(parser, *, required: bool = False) -> None:
+    """Options shared by the commands that read a measured record (`fit`, `loop`), with
+    the measured-data defaults of `_defaults`; their records are record specs
+    (`RECORD_SPEC`), read by `read_record(spec, **record_options(args))`."""
+    from .. import _defaults
+
+    scaling = _defaults.SCALING
     add_signal_arguments(parser, required=required)
     parser.add_argument(
         "--detrend",
-        default="none",
+        default=_defaults.DETREND,
         choices=("none", "mean", "linear"),
         help="remove the mean or the least-squares line from input and output of every "
-        "record, as MATLAB's detrend, before decimation and scaling (default none)",
+        f"record, as MATLAB's detrend, before decimation and scaling (default "
+        f"{_defaults.DETREND})",
     )
     parser.add_argument(
         "--orders",
-        default="2,2,2,2",
-        help="declared nR,nL,r,p (default 2,2,2,2; at most 8,8,16,16, and the record needs "
+        default=_defaults.ORDERS,
+        help=f"declared nR,nL,r,p (default {_defaults.ORDERS}; at most 8,8,16,16, and the "
+        "record needs "
         "10 samples per parameter)",
     )
-    parser.add_argument("--decimate", type=int, default=1, help="anti-aliased decimation factor")
+    parser.add_argument(
+        "--decimate",
+        type=int,
+        default=_defaults.DECIMATE,
+        help=f"anti-aliased decimation factor (default {_defaults.DECIMATE})",
+    )
     parser.add_argument(
         "--scaling",
         default=scaling,

@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 import sys
 
+from .. import _defaults
 from ._common import (
     RECORD_SPEC,
     CLIError,
@@ -26,7 +27,7 @@ from ._common import (
 FAILED = 3  # exit code of a fit whose status is a failure
 
 
-def fit_record(u, y, orders, name: str = "robust", **settings):
+def fit_record(u, y, orders, name: str = _defaults.ESTIMATOR, **settings):
     """Fit one record with the registered estimator `name`.
 
     Returns `(solution, error, errors)`: `error` is the NRMSE of the free-run simulation
@@ -98,6 +99,10 @@ def run_fit(args) -> int:
     if args.scaling != "none":
         # the standard errors are in model units, beside `estimates`
         result["estimates_physical"] = record.scaling.params_to_physical(estimates)
+        # the map is a scale factor per parameter: a standard error maps with it
+        result["std_errors_physical"] = {
+            k: abs(v) for k, v in record.scaling.params_to_physical(errors).items()
+        }
         result["scaling"] = record.scaling.to_dict()
     code = FAILED if status.failure and not (partial and unknown) else 0
     if args.save_model:
@@ -122,11 +127,22 @@ def run_fit(args) -> int:
         )
     shown = f"{error:.4g} (fit {fit_percent(error):.1f} %)" if math.isfinite(error) else "inf"
     print(f"free-run NRMSE {shown} on {len(record)} samples")
-    for name, value in estimates.items():
+    values, value_errors = estimates, errors
+    if "estimates_physical" in result:
+        # fitted in model units (`--scaling`): shown in the record's own units
+        values, value_errors = result["estimates_physical"], result["std_errors_physical"]
+        sc = record.scaling
+        print(
+            f"estimates in the record's units (fitted with --scaling {args.scaling}: "
+            f"{sc.method}, input offset {sc.u_offset:.4g} scale {sc.u_scale:.4g}, output "
+            f"offset {sc.y_offset:.4g} scale {sc.y_scale:.4g}; the model is "
+            "y - y_offset = cascade(u - u_offset))"
+        )
+    for name, value in values.items():
         if name in unknown:
             print(f"  {name:>4} = {value: .6f}   not identifiable: {unknown[name]}")
         else:
-            print(f"  {name:>4} = {value: .6f} ± {errors[name]:.2g}")
+            print(f"  {name:>4} = {value: .6f} ± {value_errors[name]:.2g}")
     return code
 
 
@@ -156,12 +172,12 @@ def add_parser(subparsers) -> None:
         ),
     )
     parser.add_argument("data", metavar="DATA", help=f"the record, {RECORD_SPEC}")
-    add_record_arguments(parser, scaling="none")
+    add_record_arguments(parser)
     parser.add_argument(
         "--estimator",
-        default="robust",
+        default=_defaults.ESTIMATOR,
         metavar="NAME",
-        help=f"default robust; {estimator_help()}",
+        help=f"default {_defaults.ESTIMATOR}; {estimator_help()}",
     )
     parser.add_argument(
         "--save-model",

@@ -49,6 +49,7 @@ def _markdown(report: dict, command: str) -> str:
         )
     lines += [
         "",
+        *([f"{report['init_samples_rule']}.", ""] if report.get("init_samples_rule") else []),
         f"State initialisation: {report['init_samples']} samples of the measured output "
         "before the scored ones set each model's state (never its parameters); the "
         "from-rest figures simulate the whole record from rest. NRMSE is normalised by "
@@ -78,6 +79,15 @@ def _markdown(report: dict, command: str) -> str:
                 f"{a['action']} {a['effect']} (round {a['round']})" for a in report["actions"]
             )
             or "nothing"
+        ),
+        *(
+            [
+                f"- {report['validation_records']} validation records: the loop pooled them; "
+                "the validation figures below and in the first table's summary are the mean "
+                "over them"
+            ]
+            if report.get("validation_records", 1) > 1
+            else []
         ),
         f"- validation NRMSE from rest before: {report['error_before_from_rest']:.4f} "
         f"(fit {fit_percent(report['error_before_from_rest']):.1f} %), after: "
@@ -266,18 +276,37 @@ def _run_loop(args, checkpoints) -> int:
     if args.init_samples is not None and args.init_samples < 0:
         raise CLIError(f"--init-samples must be >= 0, got {args.init_samples}.")
     if args.benchmark:
-        training, validation, tests, bench = _benchmark_records(args, orders)
+        training, validations, tests, bench = _benchmark_records(args, orders)
         window, test_windows = None, [None] * len(tests)
         if args.window or args.test_window:
             raise CLIError("--window and --test-window do not apply with --benchmark.")
     else:
-        training, validation, tests = _file_records(args, orders)
+        training, validations, tests = _file_records(args, orders)
         bench = None
-        window = _window(args.window, args.decimate, len(validation), offset=validation.file_start)
+        if args.window and len(validations) > 1:
+            raise CLIError(
+                f"--window scores one validation record; {len(validations)} were given to "
+                "--validate: drop --window or give one."
+            )
+        first = validations[0]
+        window = _window(args.window, args.decimate, len(first), offset=first.file_start)
         test_windows = _windows(args.test_window, args.decimate, tests)
+    init_rule = None
     if args.init_samples is None:
-        # the benchmark's own window (in samples after decimation), else 50
-        args.init_samples = 50 if bench is None else -(-bench.n_init // args.decimate)
+        # the benchmark's own window (in samples after decimation), else the measured-data
+        # default: at most a stated fraction of the shortest scored record (`_defaults`)
+        from .. import _defaults
+
+        if bench is not None:
+            args.init_samples = -(-bench.n_init // args.decimate)
+        else:
+            args.init_samples = _defaults.init_samples(len(r) for r in [*validations, *tests])
+            if args.init_samples < _defaults.INIT_SAMPLES:
+                init_rule = (
+                    f"--init-samples {args.init_samples}: the default "
+                    f"{_defaults.INIT_SAMPLES} is at most {_defaults.INIT_FRACTION:g} of the "
+                    "shortest scored record"
+                )
     scaling = training[0].scaling
     if args.report:
         writable_folder(args.report, "--report")
@@ -285,6 +314,9 @@ def _run_loop(args, checkpoints) -> int:
     def say(message):
         if not args.quiet:
             print(message, file=sys.stderr, flush=True)
+
+    if init_rule is not None:
+        say(init_rule)
 
     # An output that integrates its input (no stable ARX fits it) is modelled through its
     # difference and integrated back for scoring (`_integrating`).
@@ -297,13 +329,13 @@ def _run_loop(args, checkpoints) -> int:
         )
         if args.integrate == "yes" or pole is not None:
             integrating = {"largest_arx_pole": pole, "option": args.integrate}
-    scored_records = (validation, tests)
+    scored_records = (validations, tests)
     estimation = list(training)  # as measured (the loop may model their difference)
     if integrating is not None:
         from .._integrating import differenced
 
         training = [differenced(r) for r in training]
-        validation = differenced(validation)
+        validations = [differenced(v) for v in validations]
         integrating["sentence"] = (
             "The output integrates its input"
             + (
@@ -322,11 +354,11 @@ def _run_loop(args, checkpoints) -> int:
     result = model_error_loop(
         [r.u for r in training],
         [r.y for r in training],
-        validation.u,
-        validation.y,
+        [v.u for v in validations] if len(validations) > 1 else validations[0].u,
+        [v.y for v in validations] if len(validations) > 1 else validations[0].y,
         orders,
         max_effects=args.max_effects,
-        sample_period=validation.sample_period or 1.0,
+        sample_period=validations[0].sample_period or 1.0,
         window=window,
         progress=say,
         effects=_effects(args.effects),
@@ -369,8 +401,8 @@ def _run_loop(args, checkpoints) -> int:
         from .._integrating import integrated
 
         models = {name: integrated(*pair) for name, pair in models.items()}
-        validation = scored_records[0]  # scored as measured, the output integrated back
-    scored = [("validation", validation, window)]
+        validations = scored_records[0]  # scored as measured, the output integrated back
+    scored = [("validation", v, window) for v in validations]
     scored += [("test", r, w) for r, w in zip(tests, test_windows, strict=True)]
     scores = [
         score_record(name, _name(record), role, record.u, record.y, *pair, w, args.init_samples)
@@ -387,8 +419,14 @@ def _run_loop(args, checkpoints) -> int:
             "then models the output's difference) or model the loop closed around the output."
         )
     full["integrating"] = integrating
-    valid = {s.model: s for s in scores if s.role == "validation"}
+    # the validation figures of each model: its record's, or the mean over several
+    valid = {
+        name: _mean_score([s for s in scores if s.role == "validation" and s.model == name])
+        for name in models
+    }
+    full["validation_records"] = len(validations)
     full["init_samples"] = args.init_samples
+    full["init_samples_rule"] = init_rule
     for key, model in (("before", "declared cascade"), ("after", "final model")):
         s = valid[model]
         full[f"error_{key}"] = s.error
@@ -427,7 +465,7 @@ def _run_loop(args, checkpoints) -> int:
     )
     full["records"] = {
         "estimation": [r.to_dict() for r in training],
-        "validation": validation.to_dict(),
+        "validation": [v.to_dict() for v in validations],
         "test": [r.to_dict() for r in tests],
     }
     keys = ("error_before", "error_after", "error_before_from_rest", "error_after_from_rest")
@@ -454,7 +492,8 @@ def _run_loop(args, checkpoints) -> int:
             provenance={"command": command, "declared": full["structure_before"]},
         )
         saved.save(folder / "model.json")
-        roles = [("estimation", r) for r in estimation] + [("validation", scored_records[0])]
+        roles = [("estimation", r) for r in estimation]
+        roles += [("validation", r) for r in scored_records[0]]
         roles += [("test", r) for r in scored_records[1]]
         figures = _record_figures(saved, roles, folder, args.init_samples)
         (folder / "report.md").write_text(_markdown(full, command) + figures)
@@ -462,13 +501,13 @@ def _run_loop(args, checkpoints) -> int:
 
         pd.DataFrame(full["candidates"]).to_csv(folder / "candidates.csv", index=False)
         pd.DataFrame(full["scores"]).to_csv(folder / "scores.csv", index=False)
-        # the loop's own validation record: the output's difference when integrating
-        shown = validation
+        # the loop's own (first) validation record: the output's difference when integrating
+        shown = validations[0]
         units = _units(args.output or "y", scaling.method)
         if integrating is not None:
             from .._integrating import differenced
 
-            shown, units = differenced(validation), f"difference of {units}"
+            shown, units = differenced(shown), f"difference of {units}"
         period = shown.sample_period
         time = np.arange(len(shown)) * (period or 1.0)
         scored_from = window[0] if window is not None else min(args.init_samples, len(shown) - 2)
@@ -476,8 +515,8 @@ def _run_loop(args, checkpoints) -> int:
         plot_compare(
             time,
             shown.y,
-            result.before.simulated,
-            result.after.simulated if result.added else None,
+            result.before.simulated[: len(shown)],
+            result.after.simulated[: len(shown)] if result.added else None,
             folder / "compare.png",
             arx=arx.simulate(shown.u),
             title=f"validation record {_name(shown)}: measured vs free-run simulation",
@@ -592,7 +631,7 @@ def _file_records(args, orders):
     from .._data import Scaling, check_sample_periods, parse_record_spec, read_record
     from ._common import record_options
 
-    specs = [*args.train, *([args.validate] if args.validate else []), *(args.test or [])]
+    specs = [*args.train, *(args.validate or []), *(args.test or [])]
     named = bool(specs) and all(parse_record_spec(spec).input is not None for spec in specs)
     missing = [
         option
@@ -622,10 +661,10 @@ def _file_records(args, orders):
         )
         for r in raw
     ]
-    validation = read_record(args.validate, **options, scaling=scaling)
+    validations = [read_record(spec, **options, scaling=scaling) for spec in args.validate]
     tests = [read_record(spec, **options, scaling=scaling) for spec in args.test or []]
-    check_sample_periods([*training, validation, *tests])
-    return training, validation, tests
+    check_sample_periods([*training, *validations, *tests])
+    return training, validations, tests
 
 
 def _benchmark_records(args, orders):
@@ -669,7 +708,7 @@ def _benchmark_records(args, orders):
     training = [build(*part) for part in parts["estimation"]]
     validation = build(*parts["validation"])
     tests = [build(r.name, np.asarray(r.u, float), np.asarray(r.y, float)) for r in bench.test]
-    return training, validation, tests, bench
+    return training, [validation], tests, bench
 
 
 # The rule that cuts estimation and validation records from a benchmark's training data,
@@ -709,6 +748,29 @@ def benchmark_split(records, max_samples: int) -> dict:
         kept.append((name_, u_, y_))
         budget -= len(u_)
     return {"estimation": kept[::-1], "validation": validation}
+
+
+def _mean_score(scores):
+    """One model's validation figures: its one record's score, or the mean over several
+    (a window applies to one record only)."""
+    import numpy as np
+
+    from .._scoring import RecordScore
+
+    if len(scores) == 1:
+        return scores[0]
+    first = scores[0]
+    return RecordScore(
+        first.model,
+        "mean over the validation records",
+        "validation",
+        float(np.mean([s.error for s in scores])),
+        None,
+        float(np.mean([s.error_from_rest for s in scores])),
+        None,
+        first.init_samples,
+        float(np.sqrt(np.mean([s.rmse**2 for s in scores]))),
+    )
 
 
 def _name(record) -> str:
@@ -759,6 +821,8 @@ def _effects(text: str | None) -> tuple[str, ...] | None:
 
 
 def add_parser(subparsers) -> None:
+    from .. import _defaults
+
     parser = subparsers.add_parser(
         "loop",
         help="fit, test the residual, add the missing effect, report before/after",
@@ -784,7 +848,16 @@ def add_parser(subparsers) -> None:
         help=f"estimation record(s), estimated jointly; each a record spec, {RECORD_SPEC}",
     )
     parser.add_argument(
-        "--validate", default=None, help="validation record spec, as TRAIN (required with TRAIN)"
+        "--validate",
+        nargs="+",
+        action="extend",
+        default=None,
+        metavar="SPEC",
+        help="validation record spec(s), as TRAIN (required with TRAIN): simulated, "
+        "never fitted, to choose among the candidates; several are scored each from its "
+        "own initial state and pooled (the loop's NRMSE, residual tests and significance "
+        "test on their scored samples joined; the report's validation figures the mean "
+        "over them)",
     )
     parser.add_argument(
         "--benchmark",
@@ -808,7 +881,7 @@ def add_parser(subparsers) -> None:
         help="with --benchmark: at most this many estimation samples (the latest of the "
         "training data) and a quarter of it for validation (default 5000)",
     )
-    add_record_arguments(parser, scaling="auto", required=False)
+    add_record_arguments(parser, required=False)
     parser.add_argument(
         "--max-effects",
         type=int,
@@ -850,7 +923,9 @@ def add_parser(subparsers) -> None:
         help="N: on every scored record the model's state (never its parameters) is set "
         "from the measured output on the N samples (after decimation) before the scored "
         "ones, the nonlinear benchmarks' convention; from-rest figures are reported beside "
-        "(default 50, with --benchmark the benchmark's n_init; 0 scores from rest only)",
+        f"(default {_defaults.INIT_SAMPLES}, at most {_defaults.INIT_FRACTION:g} of the "
+        "shortest validation or test record after decimation, said when it is cut; with "
+        "--benchmark the benchmark's n_init; 0 scores from rest only)",
     )
     parser.add_argument(
         "--dm-threshold",
