@@ -64,9 +64,7 @@ def test_a_one_sided_input_is_centred_by_default():
     ("lengths", "expected"),
     [((1024, 1024), 50), ((100, 100), 25), ((100, 400), 25), ((40,), 10), ((200,), 50)],
 )
-def test_the_initialisation_window_is_cut_to_a_quarter_of_the_shortest_record(
-    lengths, expected
-):
+def test_the_initialisation_window_is_cut_to_a_quarter_of_the_shortest_record(lengths, expected):
     assert _defaults.init_samples(lengths) == expected
 
 
