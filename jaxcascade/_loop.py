@@ -321,15 +321,23 @@ def model_standard_errors(model: ExtendedModel, u, y) -> dict[str, float]:
     padded = sum(int(M.size) for _, _, M in groups)
     own = sum(int(np.shape(v)[0]) for v in us)
     errors = errors * np.sqrt(max(padded - errors.size, 1) / max(own - errors.size, 1))
-    effects = model.effects
-    names = list(model.orders.names) if model.cascade else []
-    for effect in effects:
+    return dict(zip(model_estimates(model), np.asarray(errors, float).tolist(), strict=True))
+
+
+def model_estimates(model: ExtendedModel) -> dict[str, float]:
+    """Every estimated parameter of `model` by the names of `model_standard_errors`: the
+    cascade's (`Orders.names`) and each effect's free parameters (`EFFECT.field`, an
+    array's entries `EFFECT.field[i]`)."""
+    values = dict(model.params.to_dict()) if model.cascade else {}
+    values = {k: float(v) for k, v in values.items()}
+    for effect in model.effects:
         for field in dataclasses.fields(effect):
             if field.name not in effect.fixed:
-                count = int(np.size(getattr(effect, field.name)))
-                suffixes = [""] if count == 1 else [f"[{i}]" for i in range(count)]
-                names += [f"{effect.name}.{field.name}{k}" for k in suffixes]
-    return dict(zip(names, np.asarray(errors, float).tolist(), strict=True))
+                value = np.ravel(np.asarray(getattr(effect, field.name), float))
+                suffixes = [""] if value.size == 1 else [f"[{i}]" for i in range(value.size)]
+                for k, v in zip(suffixes, value, strict=True):
+                    values[f"{effect.name}.{field.name}{k}"] = float(v)
+    return values
 
 
 @dataclasses.dataclass

@@ -219,12 +219,34 @@ def test_the_loop_report_draws_every_record_in_its_unit_against_seconds(loop):
         assert f"(records/{figure.name})" in text and figure.stat().st_size > 0
     rows = [line for line in text.splitlines() if line.startswith("- ") and " mm, " in line]
     assert len(rows) == 3 and all("period 0.01 s" in row for row in rows)
+    # the final model's equations and every estimate with its standard error, in the
+    # model's units and the records' (issue 38.5)
+    full = json.loads((report / "report.json").read_text())
+    final = full["final_model"]
+    names = [row["name"] for row in final["parameters"]]
+    assert set(full["standard_errors_after"]) == set(names)
+    section = text.split("## The final model", 1)[1].split("## ", 1)[0]
+    assert all(f"\n- {block} (" in section for block in ("NS", "LD", "ND"))
+    assert "x(t) = v(t-1) " in section  # a1 = 1, the paper's normalisation
+    for row in final["parameters"]:
+        assert f"| {row['name']} | {row['estimate']:.6g} |" in section
     # the figure's axes: the unit and seconds
     from jaxcascade._plot._comparison import plot_comparison
 
     saved = jc.load_model(report / "model.json")
     frame = pd.read_csv(folder / "test.csv")
     comparison = saved.compare(saved.record(frame["u"].to_numpy(), frame["y"].to_numpy()))
-    (ax,) = plot_comparison(comparison, report / "check.png", units="mm").axes
+    ax, zoom, res, acf = plot_comparison(comparison, report / "check.png", units="mm").axes
     assert ax.get_xlabel() == "time (s)" and ax.get_ylabel() == "mm"
     assert ax.get_xlim()[1] == pytest.approx(299 * PERIOD, rel=0.1)
+    # the legend gives fit %, NRMSE and RMSE in the record's unit
+    legend = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert any("% fit" in t and "NRMSE" in t and "RMSE" in t and " mm)" in t for t in legend)
+    # a zoomed window, stated in its title, in the same units
+    assert zoom.get_xlabel() == "time (s)" and zoom.get_ylabel() == "mm"
+    assert zoom.get_title().startswith("zoom: samples ")
+    # the residual in the unit, its autocorrelation with the 99 % band of white noise
+    assert res.get_ylabel() == "residual (mm)" and res.get_xlabel() == "time (s)"
+    assert acf.get_xlabel() == "lag (samples)"
+    band = [t.get_text() for t in acf.get_legend().get_texts()]
+    assert band == ["99 % band of white noise"]

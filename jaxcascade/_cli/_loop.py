@@ -111,6 +111,8 @@ def _markdown(report: dict, command: str) -> str:
             f"| {step['model']} | {step['error']:.4f} | {step['prediction_error']:.4f} | "
             f"{_f(step['window_error'])} |"
         )
+    if report.get("final_model"):
+        lines += _final_model_lines(report["final_model"])
     test = report["significance"]
     lines += [
         "",
@@ -157,6 +159,103 @@ def _markdown(report: dict, command: str) -> str:
             lines.append(f"| {name} | {_p(test)} | {_p(after.get(name))} |")
     lines.append(f"| all tests pass | {before['ok']} | {after['ok']} |")
     return "\n".join(lines) + "\n"
+
+
+def _final_model(model, errors: dict, scaling) -> dict:
+    """The report's final model: its structure, its equations and every estimate with its
+    standard error (model units), the cascade's also in the records' units."""
+    from .._loop import model_estimates
+
+    values = model_estimates(model)
+    physical = {}
+    if model.cascade:
+        physical = scaling.params_to_physical(model.params.to_dict())
+        physical_errors = {
+            k: abs(v)
+            for k, v in scaling.params_to_physical(
+                {k: errors[k] for k in model.orders.names}
+            ).items()
+        }
+    rows = [
+        {
+            "name": name,
+            "estimate": value,
+            "std_error": errors.get(name),
+            "physical": physical.get(name),
+            "physical_std_error": physical_errors.get(name) if physical else None,
+        }
+        for name, value in values.items()
+    ]
+    return {
+        "structure": model.structure(),
+        "equations": _equations(model.params) if model.cascade else [],
+        "effects": [e.name for e in model.effects],
+        "noise_order": int(model.noise.order),
+        "scaling": scaling.to_dict(),
+        "parameters": rows,
+    }
+
+
+def _equations(params) -> list[str]:
+    """The cascade's three blocks with the estimates written in (model units;
+    docs/model.md gives the general form)."""
+    p = params.to_dict()
+    o = params.orders
+
+    def slopes(side, count):
+        total, parts = 0.0, []
+        for i in range(1, count + 1):
+            total += p[f"M{side}{i}"]
+            lower = "0" if i == 1 else f"D{side}{i - 1} = {p[f'D{side}{i - 1}']:.4g}"
+            parts.append(f"slope {total:.4g} beyond {lower}")
+        return "; ".join(parts)
+
+    def term(coefficient, signal):
+        sign = "-" if coefficient < 0 else "+"
+        return f" {sign} {abs(coefficient):.4g} {signal}"
+
+    numerator = "v(t-1)" + "".join(term(p[f"a{j}"], f"v(t-{j})") for j in range(2, o.r + 1))
+    denominator = "".join(term(-p[f"b{i}"], f"x(t-{i})") for i in range(1, o.p + 1))
+    return [
+        f"NS (static, piecewise linear): v = f(u), right of zero {slopes('R', o.nR)}; "
+        f"left of zero {slopes('L', o.nL)}",
+        f"LD (linear): x(t) = {numerator}{denominator}",
+        f"ND (backlash): y(t) = x(t) + {p['cL']:.4g} where that is below y(t-1); "
+        f"y(t) = {p['mR']:.4g} (x(t) - {p['cR']:.4g}) where that is above y(t-1); "
+        "else y(t) = y(t-1)",
+    ]
+
+
+def _final_model_lines(final: dict) -> list[str]:
+    sc = final["scaling"]
+    lines = [
+        "",
+        "## The final model",
+        "",
+        f"`{final['structure']}`"
+        + (f", effects {', '.join(final['effects'])}" if final["effects"] else "")
+        + (f", AR({final['noise_order']}) noise model" if final["noise_order"] else ""),
+        "",
+        f"Fitted in model units (scaling `{sc['method']}`: input offset {sc['u_offset']:.4g}, "
+        f"scale {sc['u_scale']:.4g}; output offset {sc['y_offset']:.4g}, scale "
+        f"{sc['y_scale']:.4g}; the model in the records' units is y - y_offset = "
+        "cascade(u - u_offset)). Standard errors from the output-error information on the "
+        "estimation records (infinite: the records do not determine the parameter).",
+        "",
+        *(f"- {equation}" for equation in final["equations"]),
+        "",
+        "| parameter | estimate | standard error | in the records' units |",
+        "|---|---|---|---|",
+    ]
+    for row in final["parameters"]:
+        phys = (
+            "-"
+            if row["physical"] is None
+            else f"{row['physical']:.6g} ± {row['physical_std_error']:.2g}"
+        )
+        error = "-" if row["std_error"] is None else f"{row['std_error']:.2g}"
+        lines.append(f"| {row['name']} | {row['estimate']:.6g} | {error} | {phys} |")
+    return lines
 
 
 def _benchmark_table(bench: dict) -> list[str]:
@@ -419,6 +518,7 @@ def _run_loop(args, checkpoints) -> int:
             "then models the output's difference) or model the loop closed around the output."
         )
     full["integrating"] = integrating
+    full["final_model"] = _final_model(result.final, full["standard_errors_after"], scaling)
     # the validation figures of each model: its record's, or the mean over several
     valid = {
         name: _mean_score([s for s in scores if s.role == "validation" and s.model == name])
