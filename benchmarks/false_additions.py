@@ -23,7 +23,6 @@ import datetime
 import json
 import math
 import pathlib
-import platform
 import subprocess
 import time
 
@@ -63,6 +62,7 @@ def main(argv=None) -> int:
     import pandas as pd
 
     import jaxcascade as jc
+    from jaxcascade._benchmark._timing import device_description
     from jaxcascade._testing import UNDECLARED, undeclared_record
 
     out = pathlib.Path(args.out)
@@ -116,7 +116,7 @@ def main(argv=None) -> int:
         "",
         f"Command: `{command}`; commit {_commit()}, "
         f"{datetime.datetime.now(datetime.UTC):%Y-%m-%d %H:%M} UTC, "
-        f"{platform.processor() or platform.machine()}, "
+        f"{device_description()}, "
         f"{time.perf_counter() - started:.0f} s for the records computed in this run.",
         "",
         "A false addition: the loop, with its defaults, adds any effect to a record that has "

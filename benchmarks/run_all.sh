@@ -73,8 +73,10 @@ efficiency() {  # issue 13: literal and robust against the Cramer-Rao bound
     rm -rf results/efficiency
     python benchmarks/efficiency.py --realisations 100 --out results/efficiency
 }
-effects_loop() {  # issue 5: the loop on records with one undeclared effect each
+effects_loop() {  # issue 5: the loop on records with one undeclared effect each;
+    # issue 32: how often it adds an effect to a clean record (50 seeds, two lengths)
     python benchmarks/effects_loop.py --out results/effects_loop --seed 1
+    python benchmarks/false_additions.py --seeds 50 --n 1024,2000 --out results/false_additions
 }
 loop() {  # issue 21 (needs ../shared/data): the loop on the measured friction-damper
     # records; brfd.py runs every loop again, so old reports go first

@@ -79,6 +79,30 @@ ALLOWED: list[tuple[str, str]] = [
 # A space in an entry matches any run of whitespace, a line break too.
 _ALLOWED = [re.compile(pattern.replace(" ", r"\s+")) for pattern, _ in ALLOWED]
 
+
+def _false_additions(match: re.Match[str]) -> list[tuple[str, str]]:
+    """(in the page, in the file) for the false-addition counts of the README."""
+    import pandas as pd
+
+    table = pd.read_csv(ROOT / "results" / "false_additions.csv")
+    pairs = []
+    for n, group in table.groupby("n"):
+        k, count = int(group["false_addition"].sum()), len(group)
+        pairs.append((match.group(f"n{n}"), f"{k} of {count}"))
+    return pairs
+
+
+# Figures a page may quote because a test reads them back from their results file: the
+# page, the phrase (named groups hold the figures) and what the file says.
+VERIFIED = [
+    (
+        "README.md",
+        r"false additions: (?P<n1024>\d+ of \d+) records at N = 1024 and "
+        r"(?P<n2000>\d+ of \d+) at N = 2000",
+        _false_additions,
+    ),
+]
+
 _FENCE = re.compile(r"^\s*(`{3,}|~{3,})")
 _SNIPPET = re.compile(r"^\s*-+8<-+(?:\s|$)")
 _BLANKED = [
@@ -120,6 +144,12 @@ def retyped(text: str) -> list[tuple[int, str, str]]:
     """(line, rule, figure) for every retyped result in a page's text."""
     body = prose(text)
     allowed = [m.span() for pattern in _ALLOWED for m in pattern.finditer(body)]
+    # a verified phrase is checked against its file by test_verified_figures_match_their_files
+    allowed += [
+        m.span()
+        for _, phrase, _ in VERIFIED
+        for m in re.finditer(phrase.replace(" ", r"\s+"), body)
+    ]
     found = {}
     for rule, pattern in RULES.items():
         for match in pattern.finditer(body):
@@ -164,3 +194,12 @@ def test_no_page_retypes_a_result(page):
         "a result is retyped; include its file from results/ (--8<--) or name the file "
         "instead of the number, or add a non-result to ALLOWED with its reason:\n" + message
     )
+
+
+@pytest.mark.parametrize(("page", "phrase", "expected"), VERIFIED, ids=lambda v: str(v)[:40])
+def test_verified_figures_match_their_files(page, phrase, expected):
+    body = prose((ROOT / page).read_text())
+    matches = list(re.finditer(phrase.replace(" ", r"\s+"), body))
+    assert len(matches) == 1, f"{page}: the phrase {phrase!r} is not there once"
+    for quoted, held in expected(matches[0]):
+        assert quoted == held, f"{page} says {quoted!r}, the results file {held!r}"
