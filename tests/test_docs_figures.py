@@ -75,6 +75,7 @@ ALLOWED: list[tuple[str, str]] = [
     (r"below 1e100", "the record check's bound on a value's magnitude"),
     (r"1-50 % of the input span", "the Prandtl-Ishlinskii operator's threshold grid"),
     (r"\d+-\d+ % and \d+-\d+ % bands", "the quantile bands a figure draws"),
+    (r"99 % band", "the confidence level of the band a residual figure draws"),
 ]
 # A space in an entry matches any run of whitespace, a line break too.
 _ALLOWED = [re.compile(pattern.replace(" ", r"\s+")) for pattern, _ in ALLOWED]
