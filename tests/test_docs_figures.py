@@ -197,7 +197,9 @@ def test_no_page_retypes_a_result(page):
     )
 
 
-@pytest.mark.parametrize(("page", "phrase", "expected"), VERIFIED, ids=lambda v: str(v)[:40])
+@pytest.mark.parametrize(
+    ("page", "phrase", "expected"), VERIFIED, ids=[f"{v[0]}:{v[2].__name__}" for v in VERIFIED]
+)
 def test_verified_figures_match_their_files(page, phrase, expected):
     body = prose((ROOT / page).read_text())
     matches = list(re.finditer(phrase.replace(" ", r"\s+"), body))
