@@ -83,29 +83,27 @@ def _compare(model, effective=None):
     np.testing.assert_allclose(got, want, rtol=0, atol=TOLERANCE * scale)
 
 
-# The package keeps some parameters away from zero by adding a small constant that the
-# definitions do not mention (`_effects/_hysteresis.py`); against the documented
-# definition these differ by more than rounding (strict xfail: a fix of either the code
-# or the docs makes them pass, and then the marker must go).
-_SLACK = (
-    "SlackFriction.parallel uses the threshold r = |threshold| + 1e-6, not the documented "
-    "r = threshold: the output differs by up to 1.1e-5 here (r = 0.3), the tolerance is 2.1e-12"
-)
-_DAHL = (
-    "DahlFriction.parallel uses the level |level| + 1e-6, not the documented level: the "
-    "output differs by up to 1.0e-6 here (level 0.7), the tolerance is 1.9e-12"
-)
-_BACKLASH = (
-    "BacklashFriction uses the stiffness |stiffness| + 1e-9, not the documented "
-    "stiffness: the output differs by up to 3.4e-10 here (stiffness 5), the tolerance "
-    "is 2.2e-12"
-)
-XFAIL = {
-    "slack_friction": _SLACK,
-    "dahl_friction": _DAHL,
-    "backlash_friction": _BACKLASH,
-    "backlash_friction_contacts": _BACKLASH,
+# Three effects keep a parameter off zero by a documented floor (`FLOOR` of the class:
+# the slack's threshold, the Dahl level, the backlash friction's stiffness enter as
+# |value| + FLOOR); the reference writes it out.
+FLOORED = {
+    "slack_friction": ("threshold", lambda v, f: abs(v) + f),
+    "dahl_friction": ("level", lambda v, f: np.sign(v) * (abs(v) + f)),
+    "backlash_friction": ("stiffness", lambda v, f: abs(v) + f),
+    "backlash_friction_contacts": ("stiffness", lambda v, f: abs(v) + f),
 }
+
+
+def _floored(model):
+    """The reference's effective values of the floored parameters of `model`."""
+    effective = {}
+    for effect in model.effects:
+        if effect.name in FLOORED:
+            field, value = FLOORED[effect.name]
+            effective[effect.name] = {
+                field: float(value(float(getattr(effect, field)), type(effect).FLOOR))
+            }
+    return effective
 
 
 def test_every_effect_has_a_model_and_a_reference():
@@ -113,20 +111,10 @@ def test_every_effect_has_a_model_and_a_reference():
     assert set(oracle_effects.KNOWN) == set(EFFECTS)
 
 
-@pytest.mark.parametrize(
-    "name",
-    [
-        pytest.param(
-            name,
-            marks=pytest.mark.xfail(strict=True, raises=AssertionError, reason=XFAIL[name]),
-        )
-        if name in XFAIL
-        else name
-        for name in EFFECTS
-    ],
-)
+@pytest.mark.parametrize("name", list(EFFECTS))
 def test_effect_matches_its_documented_definition(name):
-    _compare(MODELS[name]())
+    model = MODELS[name]()
+    _compare(model, _floored(model) or None)
 
 
 @pytest.mark.parametrize("name", list(EFFECTS))
@@ -139,36 +127,21 @@ def test_effect_changes_the_output(name):
     assert np.max(np.abs(with_effect - base)) > 0.02 * np.max(np.abs(base))
 
 
-# The guards written out (their values are read in `_effects/_hysteresis.py`): with them
-# the rest of each definition holds to rounding. Also the documented sign conventions:
-# "signs of the first four are immaterial" (backlash friction), a negative Dahl level is
-# the force with the opposite sign.
-GUARDED = {
-    "slack_friction": (
-        SlackFriction(*_a(0.3, 0.4, 1.0, -0.8)),
-        {"threshold": 0.3 + 1e-6},
-    ),
-    "dahl_friction": (DahlFriction(*_a(4.0, 0.7)), {"level": 0.7 + 1e-6}),
-    "dahl_friction_negative_level": (DahlFriction(*_a(4.0, -0.7)), {"level": -(0.7 + 1e-6)}),
-    "backlash_friction": (
-        BacklashFriction(*_a(0.2, 5.0, 1.0, 0.8, 0.1)),
-        {"stiffness": 5.0 + 1e-9},
-    ),
-    "backlash_friction_signs": (
-        BacklashFriction(*_a(-0.2, -5.0, 1.0, -0.8, 0.1)),
-        {"stiffness": 5.0 + 1e-9},
-    ),
-    "backlash_friction_contacts": (
-        BacklashFrictionContacts(*_a(0.2, 5.0, 1.0, 0.8, 0.1)),
-        {"stiffness": 5.0 + 1e-9},
-    ),
+# The documented sign conventions: "signs of the first four are immaterial" (backlash
+# friction), a negative Dahl level is the force with the opposite sign; the floors as
+# above.
+SIGNS = {
+    "slack_friction": SlackFriction(*_a(-0.3, 0.4, 1.0, -0.8)),
+    "dahl_friction_negative_level": DahlFriction(*_a(4.0, -0.7)),
+    "backlash_friction_signs": BacklashFriction(*_a(-0.2, -5.0, 1.0, -0.8, 0.1)),
+    "backlash_friction_contacts": BacklashFrictionContacts(*_a(0.2, 5.0, 1.0, 0.8, 0.1)),
 }
 
 
-@pytest.mark.parametrize("case", list(GUARDED))
-def test_effect_matches_its_definition_with_the_guard_written_out(case):
-    effect, values = GUARDED[case]
-    _compare(_with(effect), {effect.name: values})
+@pytest.mark.parametrize("case", list(SIGNS))
+def test_effect_signs_as_documented(case):
+    model = _with(SIGNS[case])
+    _compare(model, _floored(model))
 
 
 def test_effects_compose_in_order():

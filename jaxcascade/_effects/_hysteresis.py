@@ -191,6 +191,10 @@ class SlackFriction(_LinearPath):
     # Structures: thresholds (fractions of the input span) x dead-zone fractions.
     fractions: ClassVar[tuple[float, ...]] = (0.02, 0.035, 0.05, 0.075, 0.1, 0.15, 0.2, 0.3)
     deads: ClassVar[tuple[float, ...]] = (0.0, 0.2, 0.4, 0.6, 0.8)
+    # The stop operator's threshold is r = |threshold| + FLOOR (its sign immaterial, kept
+    # off zero, where the operator and its derivative are undefined); `dead` is clipped
+    # to [0, 0.98].
+    FLOOR: ClassVar[float] = 1e-6
 
     threshold: Float[Array, ""]
     dead: Float[Array, ""]
@@ -198,7 +202,7 @@ class SlackFriction(_LinearPath):
     lower: Float[Array, ""]
 
     def parallel(self, u):
-        r = jnp.abs(self.threshold) + 1e-6
+        r = jnp.abs(self.threshold) + self.FLOOR
         s = stop_operator(u, r)
         dead = jnp.clip(self.dead, 0.0, 0.98)
         return slack_map(s, r, dead, self.upper, self.lower)
@@ -207,14 +211,14 @@ class SlackFriction(_LinearPath):
         return _operator_state(jnp.zeros((1,)), u)
 
     def parallel_with_state(self, u, state, at):
-        r = jnp.abs(self.threshold) + 1e-6
+        r = jnp.abs(self.threshold) + self.FLOOR
         s = stop_operators_from(u, jnp.reshape(r, (1,)), state.free, state.known[0])
         dead = jnp.clip(self.dead, 0.0, 0.98)
         force = slack_map(s[:, 0], r, dead, self.upper, self.lower)
         return force, _operator_after(state, s, u, at)
 
     def state_range(self, state):
-        r = jnp.abs(self.threshold) + 1e-6
+        r = jnp.abs(self.threshold) + self.FLOOR
         return -r * jnp.ones_like(state.free), r * jnp.ones_like(state.free)
 
     @classmethod
@@ -263,6 +267,9 @@ class BacklashFriction(_LinearPath):
     gap_fractions: ClassVar[tuple[float, ...]] = (0.01, 0.03, 0.1)
     travel_fractions: ClassVar[tuple[float, ...]] = (0.01, 0.04)
     max_steps: ClassVar[int] = 200
+    # The stiffness enters as |stiffness| + FLOOR (kept off zero, where the slack's
+    # travel gap / stiffness is undefined).
+    FLOOR: ClassVar[float] = 1e-9
 
     gap: Float[Array, ""]
     stiffness: Float[Array, ""]
@@ -272,7 +279,7 @@ class BacklashFriction(_LinearPath):
 
     def parallel(self, u):
         # Magnitudes: the sign of every parameter but the offset is immaterial.
-        tiny = 1e-9
+        tiny = self.FLOOR
         return self.offset + backlash_friction(
             u,
             jnp.abs(self.gap),
@@ -283,7 +290,7 @@ class BacklashFriction(_LinearPath):
         )
 
     def _magnitudes(self):
-        tiny = 1e-9
+        tiny = self.FLOOR
         return (
             jnp.abs(self.gap),
             jnp.abs(self.stiffness) + tiny,
@@ -470,13 +477,16 @@ class DahlFriction(_LinearPath):
     # A Dahl force is its level times a unit-level Dahl force of rate sigma / level: for
     # a fixed rate it is linear in the level. Rates: 1 / (fraction of the input span).
     fractions: ClassVar[tuple[float, ...]] = (0.01, 0.02, 0.05, 0.1, 0.2, 0.3)
+    # The level enters as sgn(level) (|level| + FLOOR): kept off zero, where the Dahl
+    # rate sigma / level is undefined.
+    FLOOR: ClassVar[float] = 1e-6
 
     sigma: Float[Array, ""]
     level: Float[Array, ""]
 
     def parallel(self, u):
         # A negative level is a force opposing the usual sign convention of the record.
-        level = jnp.abs(self.level) + 1e-6
+        level = jnp.abs(self.level) + self.FLOOR
         return jnp.sign(self.level) * dahl(u, jnp.abs(self.sigma), level)
 
     def rest_state(self, u):
@@ -484,12 +494,12 @@ class DahlFriction(_LinearPath):
         return _operator_state(jnp.zeros((1,)), u)
 
     def parallel_with_state(self, u, state, at):
-        level = jnp.abs(self.level) + 1e-6
+        level = jnp.abs(self.level) + self.FLOOR
         force = dahl_from(u, jnp.abs(self.sigma), level, state.free[0], state.known[0])
         return jnp.sign(self.level) * force, _operator_after(state, force, u, at)
 
     def state_range(self, state):
-        level = jnp.abs(self.level) + 1e-6
+        level = jnp.abs(self.level) + self.FLOOR
         return -level * jnp.ones_like(state.free), level * jnp.ones_like(state.free)
 
     @classmethod
