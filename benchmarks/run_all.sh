@@ -84,6 +84,9 @@ loop() {  # issue 21 (needs ../shared/data): the loop on the measured friction-d
     python benchmarks/brfd.py --data "${BRFD_DATA:-../shared/data/brfd}" --out results/brfd --decimate 16 \
         --init-samples 50 --max-effects 2 --all-records --jobs 2 \
         --effects backlash_friction,backlash_friction_contacts,slack_friction,prandtl_ishlinskii,dahl_friction,output_offset,colored_noise
+    # issue 32: each run's model on the records it was not estimated on
+    python benchmarks/brfd_amplitude.py --data "${BRFD_DATA:-../shared/data/brfd}" --runs results/brfd \
+        --out results/brfd/amplitude
 }
 stability() {  # issue 21, point 3 (needs ../shared/data): the loop's decision with
     # retries 0/2 x seeds 0-2, both directions, and the four main runs again; two loops at
