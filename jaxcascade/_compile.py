@@ -28,8 +28,12 @@ backend) compiles without them: `compiler_options()` asks once, on a tiny progra
 from __future__ import annotations
 
 import functools
+import hashlib
 import os
+import pathlib
+import pickle
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -82,6 +86,27 @@ def jit(function=None, **kwargs):
         return compiled(top(args, kw))(*args, **kw)
 
     call.lower = lambda *args, **kw: compiled(top(args, kw)).lower(*args, **kw)
+    return call
+
+
+def filter_jit(function):
+    """`equinox.filter_jit` with `compiler_options()` where it compiles a program of its
+    own (as `jit`: called on tracers it is a plain `filter_jit`, whose options would not
+    reach XLA). For functions of modules with static fields (a model, an effect)."""
+
+    @functools.cache
+    def compiled(top: bool):
+        options = compiler_options() if top else {}
+        if options:
+            return eqx.filter_jit(function, compiler_options=options)
+        return eqx.filter_jit(function)
+
+    @functools.wraps(function)
+    def call(*args, **kw):
+        leaves = jax.tree_util.tree_leaves((args, kw))
+        top = not any(isinstance(leaf, jax.core.Tracer) for leaf in leaves)
+        return compiled(top)(*args, **kw)
+
     return call
 
 
@@ -178,6 +203,214 @@ def bound(programs: int = PROGRAMS, mapped: int = MAPPINGS) -> bool:
         release()
         return True
     return False
+
+
+# -- Traced programs kept across processes ---------------------------------------------
+#
+# `jax.export` of the loop's and the fit's large programs, so that a second run does not
+# trace them again. JAX's persistent compilation cache (turned on by the CLI) keeps
+# XLA's compiled code, but every process still traces and lowers every program before it
+# can look the code up: on the model-error loop of two 1,024-sample records that is
+# about half of a warm run (`benchmarks/loop_speed.py`, `results/loop_speed.md`).
+# `exported(function)` keeps the lowered program itself (`jax.export`, serialised
+# StableHLO) in `CACHE/exported/`, beside JAX's cache folder, keyed by
+#
+# - the function's module and name,
+# - everything about the call that is not an array (`equinox.partition`: the orders, the
+#   settings, a model's structure and static fields), pickled,
+# - every array's shape and dtype,
+# - the versions of JAX and jaxlib, float64 on or off, the XLA options
+#   (`_compile.compiler_options`) and a digest of the package's source files, so that an
+#   upgrade, or any change to the package's code, reads nothing an earlier version wrote.
+#
+# A later process deserialises the program and calls it (`Exported.call` under `jax.jit`
+# with the package's XLA options): no tracing of the function, and XLA's compiled code is
+# found in JAX's persistent cache as before. The program is the same StableHLO, so the
+# results are the same (tested bit for bit).
+#
+# It is used only where it can help and cannot change a result: at the top level (not
+# under `jit`, `vmap` or `grad`, where the caller's program is being traced anyway), and
+# only while JAX's persistent cache is on (`jax_compilation_cache_dir` set: the CLI, not
+# the library by default). A call whose non-array parts cannot be pickled, or a program
+# that `jax.export` cannot serialise, runs the function's own `jit` as before (and is not
+# tried again in the process); an unreadable or unwritable cache folder only costs the
+# tracing.
+
+# Bump when the layout of the cache's files changes.
+FORMAT = 1
+# Kept programs at most (each 50-100 kB): past it the oldest go. Every change to the
+# package's code makes new keys, so a developer's folder would otherwise only grow.
+MAX_KEPT = 2000
+# jaxlib's own LAPACK kernels on the CPU (`lapack_<s|d|c|z><routine>_ffi`, the custom
+# calls of `jnp.linalg` and lineax): `jax.export` asks that a custom call without its
+# compatibility promise be named. A kept program is only ever read by the same jaxlib
+# (its version is in the key), so the promise is not needed.
+_LAPACK = tuple(
+    f"lapack_{t}{routine}_ffi"
+    for t in "sdcz"
+    for routine in (
+        "potrf geev syevd heevd gehrd orgqr ungqr ormqr unmqr getrf geqrf geqp3 gees "
+        "gesdd gesvd trsm sytrd hetrd gtsv"
+    ).split()
+)
+
+
+@functools.cache
+def _source_digest() -> str:
+    """A digest of every source file of the package (its bytes): any change to the code
+    makes a new key."""
+    root = pathlib.Path(__file__).parent
+    digest = hashlib.sha256()
+    for path in sorted(root.rglob("*.py")):
+        digest.update(str(path.relative_to(root)).encode())
+        digest.update(path.read_bytes())
+    return digest.hexdigest()
+
+
+def exported_folder() -> pathlib.Path | None:
+    """`CACHE/exported`, `CACHE` JAX's persistent cache folder; None while it is off."""
+    cache = jax.config.jax_compilation_cache_dir
+    return None if not cache else pathlib.Path(cache) / "exported"
+
+
+def _key(name: str, static, tree, leaves) -> str:
+    import jaxlib
+
+    from ._version import __version__
+
+    shapes = [(tuple(leaf.shape), str(leaf.dtype)) for leaf in leaves]
+    environment = (
+        FORMAT,
+        jax.__version__,
+        jaxlib.__version__,
+        __version__,
+        _source_digest(),
+        bool(jax.config.jax_enable_x64),
+        sorted(compiler_options().items()),
+        jax.default_backend(),
+    )
+    text = pickle.dumps((name, environment, static, tree, shapes), protocol=4)
+    return hashlib.sha256(text).hexdigest()
+
+
+def _tracing(leaves) -> bool:
+    return any(isinstance(leaf, jax.core.Tracer) for leaf in leaves)
+
+
+def exported(function=None, *, custom_calls: tuple[str, ...] = (), prepare=None):
+    """Decorator: `function` (traceable, taking and returning pytrees of arrays and
+    static parts, like an `equinox.filter_jit` function) run through its kept program
+    (the comment above); `function.jitted` is what runs where that does not apply,
+    `filter_jit` with the package's XLA options. `custom_calls`: the package's own
+    custom-call targets the program may hold (its compiled kernel: `jax.export` refuses
+    them unless named, as it cannot promise their compatibility; the source digest in
+    the key does), and `prepare()`, called before a kept program runs, registers them."""
+    if function is None:
+        return functools.partial(exported, custom_calls=custom_calls, prepare=prepare)
+    jitted = filter_jit(function)
+    name = f"{function.__module__}.{function.__qualname__}"
+    loaded: dict = {}  # key -> the kept program, arrays in, the function's output out
+    refused: set = set()  # keys whose export or pickling failed in this process
+    targets = (*_LAPACK, *custom_calls)
+    checks = tuple(jax.export.DisabledSafetyCheck.custom_call(t) for t in targets)
+
+    @functools.wraps(function)
+    def call(*args, **kwargs):
+        where = exported_folder()
+        if where is None:
+            return jitted(*args, **kwargs)
+        dynamic, static = eqx.partition((args, kwargs), eqx.is_array)
+        leaves, tree = jax.tree_util.tree_flatten(dynamic)
+        if _tracing(leaves):
+            return jitted(*args, **kwargs)
+        try:
+            key = _key(name, static, tree, leaves)
+        except Exception:  # a static part that cannot be pickled
+            return jitted(*args, **kwargs)
+        if key in refused:
+            return jitted(*args, **kwargs)
+        entry = loaded.get(key)
+        if entry is None:
+            if prepare is not None:
+                prepare()
+            entry = _load(where, key) or _export(function, static, tree, leaves, where, key, checks)
+            if entry is None:
+                refused.add(key)
+                return jitted(*args, **kwargs)
+            loaded[key] = entry
+        return entry(*leaves)
+
+    call.jitted = jitted
+    return call
+
+
+class _Slot:
+    """Where the `i`-th array output of a kept program goes in its output's template (a
+    pickled copy of the output with every array replaced by a slot)."""
+
+    def __init__(self, i: int):
+        self.i = i
+
+
+def _runner(exported_program, template):
+    options = compiler_options()
+    run = jax.jit(exported_program.call, compiler_options=options or None)
+    parts, tree = jax.tree_util.tree_flatten(template, is_leaf=lambda x: isinstance(x, _Slot))
+
+    def program(*leaves):
+        arrays = run(*leaves)
+        filled = [arrays[p.i] if isinstance(p, _Slot) else p for p in parts]
+        return jax.tree_util.tree_unflatten(tree, filled)
+
+    return program
+
+
+def _load(where: pathlib.Path, key: str):
+    path = where / f"{key}.bin"
+    try:
+        payload = pickle.loads(path.read_bytes())
+        program = jax.export.deserialize(bytearray(payload["program"]))
+        return _runner(program, payload["template"])
+    except Exception:  # missing, partly written or from another build: trace again
+        return None
+
+
+def _export(function, static, tree, leaves, where: pathlib.Path, key: str, checks=()):
+    kept = {}
+
+    def flat(*arrays):
+        args, kwargs = eqx.combine(jax.tree_util.tree_unflatten(tree, arrays), static)
+        out_leaves, out_tree = jax.tree_util.tree_flatten(function(*args, **kwargs))
+        outputs, template = [], []
+        for leaf in out_leaves:
+            if eqx.is_array(leaf):
+                template.append(_Slot(len(outputs)))
+                outputs.append(leaf)
+            else:
+                template.append(leaf)
+        kept["template"] = jax.tree_util.tree_unflatten(out_tree, template)
+        return outputs
+
+    specs = [jax.ShapeDtypeStruct(leaf.shape, leaf.dtype) for leaf in leaves]
+    try:
+        program = jax.export.export(jax.jit(flat), disabled_checks=checks)(*specs)
+        payload = {"program": bytes(program.serialize()), "template": kept["template"]}
+        blob = pickle.dumps(payload, protocol=4)
+    except Exception:  # not exportable (a host callback) or its output not picklable
+        return None
+    try:
+        where.mkdir(parents=True, exist_ok=True)
+        partial = where / f"{key}.{os.getpid()}.partial"
+        partial.write_bytes(blob)
+        partial.replace(where / f"{key}.bin")  # atomic: a reader sees all or nothing
+        kept_files = list(where.glob("*.bin"))
+        if len(kept_files) > MAX_KEPT:
+            kept_files.sort(key=lambda path: path.stat().st_mtime)
+            for path in kept_files[: len(kept_files) - MAX_KEPT]:
+                path.unlink(missing_ok=True)
+    except OSError:
+        pass  # an unwritable cache only costs the tracing next time
+    return _runner(program, kept["template"])
 
 
 def pack(us, ys, dtype=None) -> tuple:

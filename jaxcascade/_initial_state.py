@@ -47,7 +47,7 @@ import numpy as np
 from jax.flatten_util import ravel_pytree
 from jaxtyping import Array, Float
 
-from ._compile import jit, pad
+from ._compile import exported, pad
 from ._effects._base import EffectState, ExtendedModel, recent
 from ._estimator._refine import least_squares
 from ._metrics import score
@@ -223,7 +223,7 @@ class _Fit(eqx.Module):
     innovations_from_rest: Array
 
 
-@jit(static_argnames=("n", "grid", "max_steps"))
+@exported
 def _initialise(model: ExtendedModel, u, y, first, n: int, grid: tuple, max_steps: int):
     """One compiled program per model structure, padded length, `n` and settings."""
     return _fit(model, u, y, first, n, grid, max_steps)

@@ -46,7 +46,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array
 
-from ._compile import bound, compile_count, pack, pad
+from ._compile import bound, compile_count, exported, filter_jit, pack, pad
 from ._diagnose import ResidualTests, regime_from_switches, residual_tests
 from ._effects import (
     EFFECTS,
@@ -88,8 +88,8 @@ from ._validate import record
 # Compiled once per model structure and record-length bucket (`_compile.bucket_length`:
 # the loop simulates the same models on the same records many times, and a record of a
 # new length would otherwise compile a new program).
-_simulate_jit = eqx.filter_jit(simulate_with_switches)
-_parallel_jit = eqx.filter_jit(lambda effect, u: effect.parallel(u))
+_simulate_jit = filter_jit(simulate_with_switches)
+_parallel_jit = filter_jit(lambda effect, u: effect.parallel(u))
 
 
 def _simulate(model: ExtendedModel, u):
@@ -176,7 +176,7 @@ def tame_edges(params: CascadeParams, bounds) -> tuple[CascadeParams, list[str]]
     return CascadeParams.from_vector(vector, o, check=False), moved
 
 
-@eqx.filter_jit
+@exported
 def _refit(
     vectors,
     new: Effect,
@@ -268,7 +268,7 @@ def fit_parallel(model: ExtendedModel, effect_class, u, y, alternations: int = 1
     return final, float(np.mean(errors**2)), label
 
 
-@eqx.filter_jit
+@filter_jit
 def _standard_errors(model: ExtendedModel, groups):
     """`_efficiency.standard_errors` of `model` on packed records (`pack`): the masked
     simulation of every group, each record whitened apart."""

@@ -63,3 +63,86 @@ def test_bound_releases_past_its_program_limit_and_keeps_programs_under_it():
     if mappings() is not None:
         assert mappings() > 0
         assert bound(programs=10**6, mapped=0)
+
+
+# Issue 33: traced programs kept across processes (`_compile.exported`). Run in a fresh
+# interpreter: the persistent cache it needs stays off in the test process (conftest).
+KEPT = r"""
+import sys, pathlib
+import jax, jax.numpy as jnp, numpy as np
+jax.config.update("jax_enable_x64", True)
+jax.config.update("jax_compilation_cache_dir", sys.argv[1])
+from jaxcascade import _compile
+from jaxcascade._initial_state import _initialise
+from jaxcascade._testing import UNDECLARED, undeclared_record
+
+model, _ = UNDECLARED["input_delay"]()
+u, y = undeclared_record(model, jax.random.PRNGKey(3), 256, 20.0)
+args = (model, u, y, jnp.asarray(100, jnp.int32))
+options = dict(n=50, grid=(0.0, 0.5, 1.0), max_steps=20)
+kept = _initialise(*args, **options)  # traced, exported, written, run
+files = list((pathlib.Path(sys.argv[1]) / "exported").glob("*.bin"))
+assert len(files) == 1, files
+# a new process's view: nothing in memory, the program read back from its file
+fresh = _compile.exported(_initialise.__wrapped__)
+jax.clear_caches()
+loaded_calls = []
+load = _compile._load
+_compile._load = lambda *a: loaded_calls.append(1) or load(*a)
+read = fresh(*args, **options)
+assert loaded_calls and load(files[0].parent, files[0].stem) is not None
+plain = _initialise.jitted(*args, **options)
+for a, b in zip(jax.tree.leaves((kept, read)), jax.tree.leaves((plain, plain))):
+    np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+assert type(read.state) is type(plain.state)
+
+# a program jax.export cannot serialise (a host callback) runs its own jit instead
+def host(x):
+    return jax.pure_callback(np.sin, jax.ShapeDtypeStruct(x.shape, x.dtype), x) + 1.0
+kept_host = _compile.exported(host)
+np.testing.assert_array_equal(np.asarray(kept_host(jnp.ones(3))), np.sin(np.ones(3)) + 1.0)
+assert len(list((pathlib.Path(sys.argv[1]) / "exported").glob("*.bin"))) == 1
+print("ok")
+"""
+
+
+def test_exported_programs_are_read_back_and_give_the_same_results_bit_for_bit(tmp_path):
+    import subprocess
+    import sys
+
+    done = subprocess.run(
+        [sys.executable, "-c", KEPT, str(tmp_path / "cache")],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert done.returncode == 0 and done.stdout.strip() == "ok", done.stderr[-3000:]
+
+
+def test_exported_keys_change_with_the_static_parts_and_shapes():
+    from jaxcascade._compile import _key
+
+    leaves = [np.zeros(3)]
+    tree = jax.tree_util.tree_structure(leaves)
+    base = _key("f", (None, {"n": 50}), tree, leaves)
+    assert base == _key("f", (None, {"n": 50}), tree, leaves)
+    assert base != _key("f", (None, {"n": 51}), tree, leaves)
+    assert base != _key("g", (None, {"n": 50}), tree, leaves)
+    assert base != _key("f", (None, {"n": 50}), tree, [np.zeros(4)])
+    assert base != _key("f", (None, {"n": 50}), tree, [np.zeros(3, np.float32)])
+
+
+def test_exported_is_the_functions_own_jit_without_a_persistent_cache():
+    from jaxcascade._compile import exported, exported_folder
+
+    assert exported_folder() is None  # conftest: the cache is off in the tests
+    calls = []
+
+    @exported
+    def f(x):
+        calls.append(1)
+        return x * 2.0
+
+    assert float(f(jnp.asarray(2.0))) == 4.0
+    assert float(f(jnp.asarray(3.0))) == 6.0
+    assert len(calls) == 1  # traced once, by its own jit

@@ -47,17 +47,15 @@ Levenberg-Marquardt from the best gap of a grid.
 
 from __future__ import annotations
 
-import functools
 import itertools
 from typing import ClassVar
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from .._compile import pack, pad
+from .._compile import filter_jit, jit, pack, pad
 from .._hysteresis import (
     backlash_friction,
     backlash_friction_from,
@@ -355,7 +353,7 @@ class BacklashFriction(_LinearPath):
         return effect, f"{cls.name}:gap={g:.3g},k={k:.3g},levels={up:.3g}/{lo:.3g}"
 
 
-@functools.partial(jax.jit, static_argnames=("starts", "max_steps"))
+@jit(static_argnames=("starts", "max_steps"))
 def _fit_backlash_friction(z0, groups, weights, starts, max_steps):
     """Levenberg-Marquardt of `BacklashFriction.fit` from `z0` on packed records
     (`_compile.pack`): one compiled program per record buckets, not per call."""
@@ -517,7 +515,7 @@ class DahlFriction(_LinearPath):
         return effect, f"{cls.name}:travel={fraction:g}span"
 
 
-_simulate_extended = eqx.filter_jit(simulate_extended)
+_simulate_extended = filter_jit(simulate_extended)
 
 
 def _simulate_padded(model, u) -> np.ndarray:

@@ -81,7 +81,8 @@ import jax.numpy as jnp
 from jax.custom_batching import custom_vmap
 from jaxtyping import Array, Float, PRNGKeyArray
 
-from .._compile import jit
+from .. import _fused
+from .._compile import exported
 from .._model import CascadeParams, Orders, is_admissible
 from .._prior import random_systems
 from .._sensitivity import output_jacobian
@@ -219,7 +220,7 @@ def _robust(u, y, orders: Orders, key: PRNGKeyArray | None = None, **settings) -
     return _core(u, y, orders, key, **{**DEFAULTS, **settings})
 
 
-@jit(static_argnames=("orders", *DEFAULTS))
+@exported(custom_calls=(_fused.TARGET,), prepare=_fused.available)
 def _core(
     u: Float[Array, " T"],
     y: Float[Array, " T"],
