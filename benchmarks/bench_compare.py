@@ -15,8 +15,10 @@ each in a fresh process, alternating which goes first (A B, B A, ...) so that a 
 in the machine's load touches both alike.
 
 Prints each run's fits/s (sample updates/s with `-- --estimator recursive`), compile
-seconds and load average, then the ratio of this checkout's rate to the reference's,
-pair by pair: min / median / max. On a machine
+seconds and load average, then the ratio of this checkout's rate to the reference's and
+of its compile time to the reference's, pair by pair: min / median / max. A compile
+time whose median ratio exceeds `COMPILE_WARNING` (1.25) is flagged on its own line, so
+that a change that lengthens it is noticed even where the rate holds. On a machine
 shared with other work, quote the median with its spread, never one run. `--json`
 prints the same as JSON. Exit code 0 unless a bench failed (2).
 """
@@ -33,6 +35,8 @@ import sys
 import tempfile
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
+# a median compile-time ratio above this is flagged (issue 33: compile time is a budget)
+COMPILE_WARNING = 1.25
 
 
 def run_bench(folder: pathlib.Path, pythonpath: str | None, arguments: list[str]) -> dict:
@@ -131,6 +135,7 @@ def main(argv=None) -> int:
                     capture_output=True,
                 )
     ratios = [p["this"]["rate"] / p["reference"]["rate"] for p in pairs]
+    compiles = [p["this"]["compile_s"] / p["reference"]["compile_s"] for p in pairs]
     unit = pairs[0]["this"]["unit"]
     summary = {
         "this": describe(ROOT),
@@ -141,6 +146,11 @@ def main(argv=None) -> int:
         "ratio_median": statistics.median(ratios),
         "ratio_max": max(ratios),
         "unit": unit,
+        "compile_ratio_min": min(compiles),
+        "compile_ratio_median": statistics.median(compiles),
+        "compile_ratio_max": max(compiles),
+        "this_compile_s": [p["this"]["compile_s"] for p in pairs],
+        "reference_compile_s": [p["reference"]["compile_s"] for p in pairs],
         "this_rate": [p["this"]["rate"] for p in pairs],
         "reference_rate": [p["reference"]["rate"] for p in pairs],
         "load": [p["this"]["load"] for p in pairs] + [p["reference"]["load"] for p in pairs],
@@ -155,6 +165,15 @@ def main(argv=None) -> int:
             f"{summary['ratio_min']:.3f}, max {summary['ratio_max']:.3f}); "
             f"{summary['device']}; load {min(summary['load']):.1f}-{max(summary['load']):.1f}"
         )
+        print(
+            f"compile time this / reference: {summary['compile_ratio_median']:.3f} (min "
+            f"{summary['compile_ratio_min']:.3f}, max {summary['compile_ratio_max']:.3f})"
+        )
+        if summary["compile_ratio_median"] > COMPILE_WARNING:
+            print(
+                f"bench_compare: compile time up {summary['compile_ratio_median']:.2f}x "
+                f"(median), above the {COMPILE_WARNING}x this guard flags"
+            )
     return 0
 
 

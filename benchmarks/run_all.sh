@@ -40,6 +40,9 @@ bench_robust() {  # issue 16: robust on example1, example2 and the random family
     python benchmarks/bench_robust.py --out results/bench_robust
     python benchmarks/compile_options.py --out results/compile_options
 }
+speed() {  # issue 33: where a loop's and a fit's time goes, cold and warm cache, per stage
+    python benchmarks/loop_speed.py --out results/loop_speed
+}
 distributed() {  # issue 7: in-process vs 1 and 2 local Dask workers
     python benchmarks/distributed_throughput.py --realisations 2048 --n 2000 --workers 1,2 \
         --out results/distributed_throughput.csv
@@ -141,7 +144,7 @@ statuses() {  # issue 35: every estimator's statuses against the truth
     python benchmarks/status_honesty.py --realisations 100 --seed 0
 }
 
-all=(bench profile bench_robust distributed robust sweeps literal efficiency effects_loop loop
+all=(bench profile bench_robust speed distributed robust sweeps literal efficiency effects_loop loop
     stability backlash reproduce recursive inputs noise nonlinear statuses)
 needs() {  # whether step $1 reads ../shared/data
     local s

@@ -1,0 +1,325 @@
+"""Issue 33: where a measured-data session's time goes (`jaxcascade loop`, `jaxcascade fit`).
+
+    python benchmarks/loop_speed.py [--out results/loop_speed] [--n 1024] [--repeats 1]
+                                    [--brfd ../shared/data/brfd]
+
+Each case runs the CLI in a fresh Python process twice: **cold** with an empty JAX
+persistent cache folder (`JAXCASCADE_CACHE`, `XDG_CACHE_HOME`), then **warm** with the
+cache the cold run filled (what a user sees the second time). The cases:
+
+- `loop input_delay`: `jaxcascade loop est.csv --validate val.csv` with the default
+  settings on the synthetic input-delay records (`jaxcascade._testing.UNDECLARED`,
+  Example 1 with a 2-sample input delay, SNR 20, `--n` samples each, seed 0): every
+  candidate of the library is fitted.
+- `fit`: `jaxcascade fit clean.csv` (robust estimator) on the record of the same input
+  and noise without the delay (Example 1 as declared: the fit ends `converged`).
+- `loop brfd` (with `--brfd`): one damper run of `benchmarks/brfd.py` (harmonics and the
+  Imperial Valley earthquake, validated on Kocaeli, `--decimate 8`, the damper's effect
+  list), through the same CLI.
+
+Inside the process JAX's monitoring events are summed: programs traced (`jaxpr_trace`),
+lowered to StableHLO (`lowering`; `programs` counts them), compiled by XLA or loaded from
+the persistent cache (`compile_or_load`: JAX's backend-compile event covers both; of it,
+`cache_load` loading the `cache_hits`); `execution_and_host` is the rest of the wall time
+(running the programs, NumPy, reading the records, the report). For the loop, each event is also
+attributed to the loop's stage it happened in (`declared fit`, `evaluate`, `candidate
+fit`, `candidate score`, `standard errors`, `other`). Writes OUT.csv (one row per case
+and cache state), OUT_stages.csv and OUT.md with the machine and its load.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import functools
+import io
+import json
+import os
+import pathlib
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+
+EVENTS = {
+    "/jax/core/compile/jaxpr_trace_duration": "jaxpr_trace",
+    "/jax/core/compile/jaxpr_to_mlir_module_duration": "lowering",
+    "/jax/core/compile/backend_compile_duration": "compile_or_load",
+    "/jax/compilation_cache/cache_retrieval_time_sec": "cache_load",
+}
+# the events that partition a program's preparation (cache loading is inside compiling)
+ACCOUNTED = ("jaxpr_trace", "lowering", "compile_or_load")
+COUNTS = {
+    "/jax/core/compile/jaxpr_to_mlir_module_duration": "programs",
+    "/jax/compilation_cache/cache_hits": "cache_hits",
+}
+STAGES = {
+    # function of jaxcascade._loop -> the stage its calls belong to
+    "evaluate": "evaluate",
+    "_fit_candidate": "candidate fit",
+    "_fit_noise": "candidate fit",
+    "_score_candidate": "candidate score",
+    "_score_noise": "candidate score",
+    "model_standard_errors": "standard errors",
+    "refit": "declared fit",  # outside a candidate's fit: the declared cascade's refinement
+}
+
+
+def child(argv: list[str]) -> dict:
+    """Run `jaxcascade ARGV` in this process and return what the events say."""
+    import jax
+
+    from jaxcascade import _loop
+    from jaxcascade._cli import main
+
+    totals: dict[str, float] = {}
+    stages: dict[str, dict[str, float]] = {}
+    where = ["other"]
+
+    def add(stage, name, value):
+        for table in (totals, stages.setdefault(stage, {})):
+            table[name] = table.get(name, 0.0) + value
+
+    def durations(event, seconds, **_):
+        if event in EVENTS:
+            add(where[-1], EVENTS[event], seconds)
+        if event in COUNTS:
+            add(where[-1], COUNTS[event], 1)
+
+    def counts(event, **_):
+        if event in COUNTS:
+            add(where[-1], COUNTS[event], 1)
+
+    jax.monitoring.register_event_duration_secs_listener(durations)
+    jax.monitoring.register_event_listener(counts)
+
+    def staged(function, stage):
+        @functools.wraps(function)
+        def call(*args, **kwargs):
+            if where[-1] != "other":  # called inside another stage: that stage's time
+                return function(*args, **kwargs)
+            where.append(stage)
+            began = time.perf_counter()
+            try:
+                return function(*args, **kwargs)
+            finally:
+                where.pop()
+                add(stage, "wall", time.perf_counter() - began)
+
+        return call
+
+    for name, stage in STAGES.items():
+        setattr(_loop, name, staged(getattr(_loop, name), stage))
+    robust = _loop.Robust
+
+    class Timed(robust):  # the declared cascade's fit (the loop's only Robust() call)
+        def __call__(self, *args, **kwargs):
+            return staged(super().__call__, "declared fit")(*args, **kwargs)
+
+    _loop.Robust = Timed
+    began = time.perf_counter()
+    with contextlib.redirect_stdout(io.StringIO()):
+        code = main(argv)
+    wall = time.perf_counter() - began
+    stages["other"] = stages.get("other", {})
+    stages["other"]["wall"] = wall - sum(
+        s.get("wall", 0.0) for k, s in stages.items() if k != "other"
+    )
+    return {"code": code, "wall": wall, "totals": totals, "stages": stages}
+
+
+def run_case(argv: list[str], cache: pathlib.Path) -> dict:
+    env = dict(os.environ, JAXCASCADE_CACHE=str(cache / "xla"), XDG_CACHE_HOME=str(cache))
+    env.pop("JAX_ENABLE_X64", None)
+    began = time.perf_counter()
+    done = subprocess.run(
+        [sys.executable, __file__, "--child", json.dumps(argv)],
+        env=env,
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    process = time.perf_counter() - began
+    if done.returncode != 0:
+        raise SystemExit(f"loop_speed: {' '.join(argv)} failed:\n{done.stderr[-3000:]}")
+    result = json.loads(done.stdout.strip().splitlines()[-1])
+    if result["code"] != 0:
+        raise SystemExit(f"loop_speed: jaxcascade {' '.join(argv)} exit {result['code']}")
+    result["process"] = process
+    return result
+
+
+def records(folder: pathlib.Path, n: int) -> tuple[str, str, str]:
+    import jax
+    import numpy as np
+
+    jax.config.update("jax_enable_x64", True)
+    from jaxcascade._testing import UNDECLARED, undeclared_record
+
+    k_est, k_val = jax.random.split(jax.random.PRNGKey(0))
+    paths = []
+    for name, key, effect in (
+        ("est", k_est, "input_delay"),
+        ("val", k_val, "input_delay"),
+        ("clean", k_est, None),
+    ):
+        model, ar = UNDECLARED[effect]()
+        u, y = undeclared_record(model, key, n, 20.0, ar)
+        path = folder / f"{name}.csv"
+        np.savetxt(path, np.column_stack([u, y]), delimiter=",", header="u,y", comments="")
+        paths.append(str(path))
+    return paths[0], paths[1], paths[2]
+
+
+BRFD_EFFECTS = (
+    "backlash_friction,backlash_friction_contacts,slack_friction,prandtl_ishlinskii,"
+    "dahl_friction,output_offset,colored_noise"
+)
+
+
+def brfd_argv(root: str, folder: pathlib.Path) -> list[str]:
+    """The damper run `harmonics+imperialvalley_to_kocaeli` of benchmarks/brfd.py at
+    `--decimate 8` (its effect list, `--init-samples 50`, `--max-effects 2`) as one
+    `jaxcascade loop` command, its report in FOLDER."""
+    sys.path.insert(0, str(pathlib.Path(__file__).parent))
+    import brfd
+
+    options = argparse.Namespace(
+        decimate=8,
+        stability=False,
+        all_records=False,
+        init_samples=50,
+        max_effects=2,
+        effects=BRFD_EFFECTS,
+    )
+    run = next(
+        r for r in brfd.runs(pathlib.Path(root), options) if r[0].startswith("harmonics+imp")
+    )
+    return brfd.loop_argv(folder, pathlib.Path(root), options, *run)
+
+
+def markdown(frame) -> str:
+    """A pipe table of `frame` (no optional dependency)."""
+    columns = [str(c) for c in frame.columns]
+    lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
+    for row in frame.itertuples(index=False):
+        lines.append("| " + " | ".join(str(v) for v in row) + " |")
+    return "\n".join(lines)
+
+
+def machine() -> str:
+    cpu = "unknown CPU"
+    try:
+        for line in pathlib.Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    flags = (
+        pathlib.Path("/proc/cpuinfo").read_text() if pathlib.Path("/proc/cpuinfo").exists() else ""
+    )
+    avx = "avx512" if "avx512f" in flags else ("avx2" if "avx2" in flags else "no avx2")
+    return f"{cpu}, {os.cpu_count()} cores, {avx}, Python {platform.python_version()}"
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", default="results/loop_speed")
+    parser.add_argument("--n", type=int, default=1024)
+    parser.add_argument("--repeats", type=int, default=1, help="cold/warm pairs per case")
+    parser.add_argument("--brfd", default=None, help="../shared/data/brfd: add the damper run")
+    parser.add_argument("--child", default=None, help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args.child is not None:
+        print(json.dumps(child(json.loads(args.child))))
+        return 0
+
+    import jax
+    import pandas as pd
+
+    import jaxcascade
+
+    out = pathlib.Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    rows, stage_rows = [], []
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = pathlib.Path(tmp)
+        est, val, clean = records(folder, args.n)
+        cases = {
+            "loop input_delay": ["loop", est, "--validate", val, "--input", "u", "--output", "y"],
+            "fit": ["fit", clean, "--input", "u", "--output", "y"],
+        }
+        if args.brfd:
+            cases["loop brfd"] = brfd_argv(args.brfd, folder / "brfd")
+        load = os.getloadavg()[0]
+        for repeat in range(args.repeats):
+            for case, cli in cases.items():
+                cache = folder / f"cache-{case.replace(' ', '_')}-{repeat}"
+                for state in ("cold", "warm"):
+                    result = run_case(cli, cache)
+                    t = result["totals"]
+                    accounted = sum(t.get(k, 0.0) for k in ACCOUNTED)
+                    row = {
+                        "case": case,
+                        "cache": state,
+                        "repeat": repeat,
+                        "process_s": round(result["process"], 2),
+                        "command_s": round(result["wall"], 2),
+                        "programs": int(t.get("programs", 0)),
+                        "cache_hits": int(t.get("cache_hits", 0)),
+                        **{f"{k}_s": round(t.get(k, 0.0), 2) for k in EVENTS.values()},
+                        "execution_and_host_s": round(result["wall"] - accounted, 2),
+                    }
+                    rows.append(row)
+                    print(row, flush=True)
+                    for stage, values in result["stages"].items():
+                        stage_rows.append(
+                            {
+                                "case": case,
+                                "cache": state,
+                                "repeat": repeat,
+                                "stage": stage,
+                                "wall_s": round(values.get("wall", 0.0), 2),
+                                "programs": int(values.get("programs", 0)),
+                                **{f"{k}_s": round(values.get(k, 0.0), 2) for k in EVENTS.values()},
+                            }
+                        )
+    table = pd.DataFrame(rows)
+    stages = pd.DataFrame(stage_rows)
+    table.to_csv(out.with_suffix(".csv"), index=False)
+    stages.to_csv(out.parent / f"{out.name}_stages.csv", index=False)
+    commit = subprocess.run(
+        ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=False
+    ).stdout.strip()
+    lines = [
+        "# Where a measured-data session's time goes",
+        "",
+        f"`python benchmarks/loop_speed.py --n {args.n} --repeats {args.repeats}"
+        + (f" --brfd {args.brfd}" if args.brfd else "")
+        + f"`, commit {commit or 'unknown'}, jaxcascade {jaxcascade.__version__}, "
+        f"jax {jax.__version__}; {machine()}; load average {load:.2f} at the start.",
+        "",
+        "Each case in a fresh process: cold (empty persistent cache), then warm (the cache "
+        "the cold run filled). Seconds. `programs`: programs traced and lowered (in every "
+        "process, cached or not); `compile_or_load`: XLA compiling them or loading them "
+        "from the persistent cache (`cache_hits` loaded, in `cache_load_s`; programs that "
+        "compile in under 0.5 s are not cached, JAX's threshold as the CLI sets it); "
+        "`execution_and_host`: the rest of the command's wall time; `process`: the whole "
+        "process, Python's start and imports included.",
+        "",
+        markdown(table),
+        "",
+        "## Per stage of the loop",
+        "",
+        markdown(stages[stages.case.str.startswith("loop")]),
+        "",
+    ]
+    out.with_suffix(".md").write_text("\n".join(lines))
+    print(f"wrote {out.with_suffix('.md')}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
