@@ -307,7 +307,9 @@ def main(argv=None) -> int:
         "from the persistent cache (`cache_hits` loaded, in `cache_load_s`; programs that "
         "compile in under 0.5 s are not cached, JAX's threshold as the CLI sets it); "
         "`execution_and_host`: the rest of the command's wall time; `process`: the whole "
-        "process, Python's start and imports included.",
+        "process, Python's start and imports included. On a cold run the tracing that "
+        "`jax.export` does for the kept programs (`_compile.exported`) sends no trace "
+        "event and is counted in `execution_and_host`.",
         "",
         markdown(table),
         "",
