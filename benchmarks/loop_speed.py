@@ -205,19 +205,15 @@ def markdown(frame) -> str:
 
 
 def machine() -> str:
-    cpu = "unknown CPU"
+    """The CPU in words (the package's own description) and its widest vector unit."""
+    from jaxcascade._benchmark._timing import device_description
+
     try:
-        for line in pathlib.Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
+        flags = pathlib.Path("/proc/cpuinfo").read_text()
     except OSError:
-        pass
-    flags = (
-        pathlib.Path("/proc/cpuinfo").read_text() if pathlib.Path("/proc/cpuinfo").exists() else ""
-    )
+        flags = ""
     avx = "avx512" if "avx512f" in flags else ("avx2" if "avx2" in flags else "no avx2")
-    return f"{cpu}, {os.cpu_count()} cores, {avx}, Python {platform.python_version()}"
+    return f"{device_description()}, {avx}, Python {platform.python_version()}"
 
 
 def main(argv=None) -> int:
