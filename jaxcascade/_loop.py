@@ -235,7 +235,9 @@ def refit(model: ExtendedModel, start: Start, u, y, max_steps: int = 150):
     )
     costs = np.asarray(costs)
     best = int(np.argmin(np.where(np.isfinite(costs), costs, np.inf)))
-    chosen = jax.tree_util.tree_map(lambda leaf: leaf[best], models)
+    # the best start's model, indexed on the host (an eager `leaf[best]` compiles a
+    # program per leaf shape)
+    chosen = jax.tree_util.tree_map(lambda leaf: jnp.asarray(np.asarray(leaf)[best]), models)
     return chosen, float(costs[best]), int(np.asarray(status)[best])
 
 

@@ -9,6 +9,7 @@ that stays the estimator's.
 
 from __future__ import annotations
 
+import functools
 import math
 import sys
 
@@ -36,27 +37,45 @@ def fit_record(u, y, orders, name: str = _defaults.ESTIMATOR, **settings):
     output-error information at the estimate, sigma from the residual, white noise).
     """
     import jax
-    import jax.numpy as jnp
     import numpy as np
 
-    from .._efficiency import standard_errors
     from .._estimator import estimator
-    from .._metrics import score
-    from .._model import CascadeParams
-    from .._simulate import simulate
     from .._validate import record as checked
 
     u, y = checked(u, y, orders=orders, where="fit")
     solution = jax.device_get(estimator(name, **settings)(u, y, orders))
-    vector = jnp.asarray(solution.params.to_vector(), u.dtype)
-
-    def simulate_vector(vector):
-        return simulate(CascadeParams.from_vector(vector, orders, check=False), u)
-
-    y_sim = np.asarray(simulate_vector(vector))
-    errors, _ = standard_errors(simulate_vector, vector, y)
+    y_sim, error, errors = _after_fit()(solution.params, u, y)
     errors = dict(zip(orders.names, np.asarray(errors, float).tolist(), strict=True))
-    return solution, score(np.asarray(y), y_sim), errors
+    error = float(error)  # `_metrics.score`'s guard: a simulation that blows up is inf
+    return solution, error if math.isfinite(error) else math.inf, errors
+
+
+@functools.cache
+def _after_fit():
+    """What `fit_record` computes from an estimate, as one program (one instead of about
+    fifty small ones op by op; kept across runs with the fit's, `_compile.exported`):
+    the free-run simulation, its NRMSE on the record (`_metrics.nrmse`) and the standard
+    errors. Built on
+    first use: the command line's module imports no JAX."""
+    from .._compile import exported
+    from .._efficiency import standard_errors
+    from .._metrics import nrmse
+    from .._model import CascadeParams
+    from .._simulate import simulate
+
+    @exported
+    def after_fit(params, u, y):
+        orders = params.orders
+
+        def simulate_vector(vector):
+            return simulate(CascadeParams.from_vector(vector, orders, check=False), u)
+
+        vector = params.to_vector().astype(u.dtype)
+        y_sim = simulate_vector(vector)
+        errors, _ = standard_errors(simulate_vector, vector, y)
+        return y_sim, nrmse(y, y_sim), errors
+
+    return after_fit
 
 
 def run_fit(args) -> int:
