@@ -55,8 +55,7 @@ def _after_fit():
     """What `fit_record` computes from an estimate, as one program (one instead of about
     fifty small ones op by op; kept across runs with the fit's, `_compile.exported`):
     the free-run simulation, its NRMSE on the record (`_metrics.nrmse`) and the standard
-    errors. Built on
-    first use: the command line's module imports no JAX."""
+    errors. Built on first use: the command line's module imports no JAX."""
     from .._compile import exported
     from .._efficiency import standard_errors
     from .._metrics import nrmse
