@@ -102,11 +102,11 @@ def linear(P: dict, v) -> np.ndarray:
     return x
 
 
-def backlash(P: dict, x) -> np.ndarray:
-    """ND, eq. 9 with mL = 1; where both lines would switch, the left line wins."""
+def backlash(P: dict, x, y_prev: float = 0.0) -> np.ndarray:
+    """ND, eq. 9 with mL = 1, from the output `y_prev` before the first sample (0: at
+    rest); where both lines would switch, the left line wins."""
     cL, mR, cR = P["cL"], P["mR"], P["cR"]
     y = np.zeros(len(x))
-    y_prev = 0.0
     for t in range(len(x)):
         left = 1.0 * (x[t] + cL)
         right = mR * (x[t] - cR)

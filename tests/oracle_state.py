@@ -42,19 +42,8 @@ def linear_from(P: dict, v, v_past, x_past) -> np.ndarray:
 
 
 def backlash_from(P: dict, x, y_prev: float) -> np.ndarray:
-    cL, mR, cR = P["cL"], P["mR"], P["cR"]
-    y = np.zeros(len(x))
-    for t in range(len(x)):
-        left = x[t] + cL
-        right = mR * (x[t] - cR)
-        if left < y_prev:
-            y[t] = left
-        elif y_prev < right:
-            y[t] = right
-        else:
-            y[t] = y_prev
-        y_prev = y[t]
-    return y
+    """The backlash from the output `y_prev` before the first sample (`oracle.backlash`)."""
+    return oracle.backlash(P, x, y_prev)
 
 
 def simulate_from(P: dict, u, v_past, x_past, y_prev: float):
