@@ -10,12 +10,11 @@ XLA's options trade little run time for much less of it:
   MLIR fusion emitters;
 - `xla_backend_optimization_level = 1` (LLVM's -O1 instead of -O2/-O3).
 
-Measured on the robust benchmark's program (256 records, 2-core AMD EPYC, float64,
-cold compile in fresh processes, alternated; `benchmarks/compile_options.py`,
-`results/compile_options.md`): compile 8.3-11.0 s instead of 14.2-18.0 s over the three
-benchmark systems, 8-19% fewer fits per second. The literal iteration's program: 1.8 s
-instead of 3.3 s, no slower. Level 0 compiles faster still but runs about 4 times slower
-(the loop bodies are not vectorised), so it is not used.
+Their effect on the robust benchmark's program (cold compile in fresh processes,
+alternated, both settings in one sitting) and on its fits per second is measured by
+`benchmarks/compile_options.py` (`results/compile_options.md`, which names its machine).
+Level 0 compiles faster still but runs about 4 times slower (the loop bodies are not
+vectorised), so it is not used.
 
 The options are passed per program (`jax.jit(..., compiler_options=...)`), never set
 globally: importing the package changes nothing in JAX's configuration. They reach
