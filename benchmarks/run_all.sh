@@ -143,9 +143,12 @@ nonlinear() {  # issue 32 (needs ../shared/data): the loop on the community's no
 statuses() {  # issue 35: every estimator's statuses against the truth
     python benchmarks/status_honesty.py --realisations 100 --seed 0
 }
+general() {  # issue 39: the general-backlash examples' branches on their records
+    python benchmarks/general_backlash.py --seed 0 --out results/general_backlash
+}
 
 all=(bench profile bench_robust speed distributed robust sweeps literal efficiency effects_loop loop
-    stability backlash reproduce recursive inputs noise nonlinear statuses)
+    stability backlash reproduce recursive inputs noise nonlinear statuses general)
 needs() {  # whether step $1 reads ../shared/data
     local s
     for s in "${needs_shared_data[@]}"; do [ "$s" = "$1" ] && return 0; done
