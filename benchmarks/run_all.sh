@@ -143,8 +143,9 @@ nonlinear() {  # issue 32 (needs ../shared/data): the loop on the community's no
 statuses() {  # issue 35: every estimator's statuses against the truth
     python benchmarks/status_honesty.py --realisations 100 --seed 0
 }
-general() {  # issue 39: the general-backlash examples' branches on their records
-    python benchmarks/general_backlash.py --seed 0 --out results/general_backlash
+general() {  # issue 39: the general-backlash examples' branches on their records, their
+    # output-error estimate and the key-term iteration, noise-free
+    python benchmarks/general_backlash.py --seed 0 --records 20 --out results/general_backlash
 }
 
 all=(bench profile bench_robust speed distributed robust sweeps literal efficiency effects_loop loop

@@ -49,13 +49,26 @@ def regression(
       the breakpoint regressors `-f` vanish identically; with unit slopes the breakpoint
       column's coefficient is `D * M` instead of `D` (`_estimator._literal`).
     """
-    o = params.orders
     dtype = u.dtype
     y_prev = shift(y, 1)
     g1, g2 = backlash_switches(
         x, y_prev, params.cL.astype(dtype), params.mR.astype(dtype), params.cR.astype(dtype)
     )
     yc = y - y_prev * (1 - g1) * (1 - g2)
+    ns_ld = key_term_columns(params, u, v, x, unit_slopes=unit_slopes) * g1[None, :]
+    backlash = jnp.stack([g1, x * g2, -g2])
+    phi = jnp.concatenate([ns_ld, backlash], axis=0).T
+    return Regression(phi, yc, g1, g2)
+
+
+def key_term_columns(params: CascadeParams, u, v, x, *, unit_slopes: bool = False) -> Array:
+    """The NS and LD regressors of the key term `x(t)` (eq. 17's first columns, in theta
+    order, one row per column: `Float[Array, "P_ns_ld T"]`), before they are switched on
+    by `g1`: the right and left segments' `h u(t-1)` and breakpoint columns `-f`, the
+    numerator's `v(t-i)`, `i >= 2`, and the denominator's `-x(t-j)`. Shared by the
+    cascade's regression and the general backlash's (`_estimator._general_keyterm`)."""
+    o = params.orders
+    dtype = u.dtype
     u1 = shift(u, 1)
     zero = jnp.zeros((1,), dtype)
     DR = jnp.concatenate([zero, params.DR.astype(dtype)])
@@ -73,11 +86,7 @@ def regression(
         jnp.stack([shift(v, i) for i in range(2, o.r + 1)]) if o.r > 1 else None,
         jnp.stack([-shift(x, j) for j in range(1, o.p + 1)]) if o.p > 0 else None,
     ]
-    columns = [c for c in columns if c is not None]
-    ns_ld = jnp.concatenate(columns, axis=0) * g1[None, :]
-    backlash = jnp.stack([g1, x * g2, -g2])
-    phi = jnp.concatenate([ns_ld, backlash], axis=0).T
-    return Regression(phi, yc, g1, g2)
+    return jnp.concatenate([c for c in columns if c is not None], axis=0)
 
 
 def solve_normal_equations(

@@ -177,8 +177,9 @@ def test_a_falling_second_zero_is_allowed_and_vmap_skips_the_checks():
 def test_robust_then_curved_refinement_reaches_the_truth_noise_free(name):
     # Issue 39, done-when: noise-free, the output-error estimate reaches the truth to
     # 1e-6 (general1 in the slow set: a second robust program; both examples are in
-    # results/general_backlash/estimates.md). The straight model's own robust fit misses it (the branches are curved);
-    # refined with curvature from 0 (the paper's initial values) it is the truth.
+    # results/general_backlash/estimates.md). The straight model's own robust fit misses
+    # it (the branches are curved); refined with curvature from 0 (the paper's initial
+    # values) it is the truth.
     from jaxcascade._estimator._general_refine import robust_general
 
     example = general_example(name)
@@ -207,3 +208,67 @@ def test_a_fit_whose_branch_turns_on_the_record_is_not_converged():
     fit = refine_general(params, GeneralBacklash.straight(params, 2), u, y)
     assert float(fit.cost) < 1e-20 and not fit.increasing
     assert int(fit.status) == jc.Status.failed
+
+
+# ---- the key-term iteration ------------------------------------------------------------
+
+
+@pytest.mark.parametrize("name", sorted(GENERAL_EXAMPLES))
+def test_the_truth_is_a_fixed_point_of_the_key_term_regression(name):
+    # the note's check: with the true internal signals the regression has full column
+    # rank and returns the truth (noise-free)
+    from jaxcascade._estimator._general_keyterm import general_regression
+    from jaxcascade._regression import solve_normal_equations
+
+    example = general_example(name)
+    params, nd = example.params(), example.backlash()
+    u = _input(example.n_samples)
+    y = simulate_general(params, nd, u)
+    phi, yc = general_regression(params, nd, u, y)
+    theta, singular, cost = solve_normal_equations(phi, yc)
+    assert not bool(singular) and float(cost) < 1e-24
+    truth = np.concatenate([params.to_theta(), nd.curveL, nd.curveR])
+    np.testing.assert_allclose(theta, truth, rtol=0, atol=1e-10)
+
+
+def test_degree_one_regression_is_the_cascades():
+    from jaxcascade._estimator._general_keyterm import general_regression
+    from jaxcascade._regression import regression
+
+    params = jc.example(2).params()
+    u = _input(1000)
+    y = jc.simulate(params, u) + 0.01 * jax.random.normal(jax.random.PRNGKey(7), (1000,))
+    s = signals(params, u)
+    phi, yc = general_regression(params, GeneralBacklash.straight(params), u, y)
+    reference = regression(params, u, y, s.v, s.x)
+    np.testing.assert_array_equal(phi, reference.phi)
+    np.testing.assert_array_equal(yc, reference.yc)
+
+
+@pytest.mark.parametrize("name, seed", [("general1", 1), ("general2", 0)])
+def test_key_term_iteration_reaches_the_truth_from_the_papers_initial_values(name, seed):
+    from jaxcascade._estimator._general_keyterm import key_term_general
+
+    example = general_example(name)
+    params, nd = example.params(), example.backlash()
+    u = _input(example.n_samples, seed=seed)
+    fit = key_term_general(u, simulate_general(params, nd, u), params.orders, nd.degree)
+    assert int(fit.status) == jc.Status.converged and 2 < int(fit.iterations) < 200
+    truth = np.concatenate([params.to_vector(), nd.curveL, nd.curveR])
+    estimate = np.concatenate([fit.params.to_vector(), fit.backlash.curveL, fit.backlash.curveR])
+    np.testing.assert_allclose(estimate, truth, rtol=0, atol=1e-6)
+
+
+def test_key_term_statuses_say_when_the_data_do_not_determine_the_estimate():
+    from jaxcascade._estimator._general_keyterm import key_term_general
+
+    example = general_example("general2")
+    params, nd = example.params(), example.backlash()
+    # an input that never goes below zero: the left segment is never active
+    u = jnp.abs(_input(example.n_samples))
+    fit = key_term_general(u, simulate_general(params, nd, u), params.orders, nd.degree)
+    assert int(fit.status) in (jc.Status.singular, jc.Status.diverged)
+    # one step only: not converged
+    u = _input(example.n_samples)
+    fit = key_term_general(u, simulate_general(params, nd, u), params.orders, 3, max_iterations=2)
+    assert int(fit.status) == jc.Status.max_iterations and int(fit.iterations) == 2

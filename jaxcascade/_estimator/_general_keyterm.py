@@ -1,0 +1,144 @@
+"""The key-term iteration for the cascade with a general output backlash (issue 39).
+
+`../shared/GENERAL_BACKLASH.md` derives it the way the 2016 paper derives its own
+(METHOD.md, eqs. 15-28): with the switching variables `g1`, `g2` of the general
+backlash (`_general_backlash.general_switches`) and the corrected output
+`yc = y - (1 - g1)(1 - g2) y(t-1)`,
+
+    yc = g1 x + cL g1 + mR g2 x - C g2
+         + sum_{i=2..q} mL_i g1 (x + cL)^i + sum_{i=2..q} mR_i g2 (x - cR)^i
+
+with `C = cR mR`. The key term `g1 x(t)` is replaced by the input and linear blocks
+(`_regression.key_term_columns`, switched on by `g1`), `g2 x`, the powers
+`(x + cL)^i`, `(x - cR)^i` and the switches are internal variables computed from the
+previous estimate (v, x simulated with it), and one least-squares solve gives every
+parameter: the cascade's theta (eq. 18) followed by `mL_2..q` and `mR_2..q`.
+
+Like `Literal` it starts from the paper's initial values (`_literal.initial_guess`,
+curvature 0) with the paper's first iteration (`_literal.first_iteration`: v ~ u,
+x ~ y; with curvature 0 the general backlash's switches are the straight one's), then
+repeats the step. Statuses:
+
+- `singular`: the last step's regression was rank deficient (a regime never visited,
+  columns dependent at the estimate): the data do not determine every parameter;
+- `converged`: otherwise, where a step changed no element of theta by more than
+  `tol (1 + |theta|)`;
+- `diverged`: an estimate became non-finite or larger than `divergence_bound`;
+- `max_iterations`: none of these within `max_iterations` steps (under noise the
+  switching pattern can cycle between neighbouring estimates; no cycle detection yet).
+
+Noise-free, the truth is a fixed point (`tests/test_general_backlash.py`); the
+iteration counts on the note's examples are in `results/general_backlash/keyterm.md`.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Float
+
+from .._compile import filter_jit
+from .._general_backlash import GeneralBacklash, general_switches
+from .._model import CascadeParams, Orders
+from .._regression import key_term_columns, solve_normal_equations
+from .._simulate import linear_block, pwl, shift
+from .._status import Status
+from .._validate import record
+from ._literal import first_iteration, initial_guess
+
+
+class KeyTermGeneral(eqx.Module):
+    """Output of `key_term_general`: the estimate (cascade and general backlash), a
+    `Status` code, the steps taken (the first iteration counted) and the last step's
+    cost J (mean squared equation error)."""
+
+    params: CascadeParams
+    backlash: GeneralBacklash
+    status: Array
+    iterations: Array
+    cost: Float[Array, ""]
+
+
+def general_regression(params: CascadeParams, nd: GeneralBacklash, u, y):
+    """`(phi, yc)` of one step from the estimate `(params, nd)`: v and x simulated with
+    it, the general backlash's switches on the measured output's past (module
+    docstring); columns in theta order, then the curvature columns."""
+    v = pwl(params, u)
+    x = linear_block(params, v)
+    y_prev = shift(y, 1)
+    g1, g2 = general_switches(nd, x, y_prev)
+    yc = y - y_prev * (1 - g1) * (1 - g2)
+    cL, cR = (jnp.asarray(c, u.dtype) for c in (nd.cL, nd.cR))
+    powers = range(2, nd.degree + 1)
+    curved = [g1 * (x + cL) ** i for i in powers] + [g2 * (x - cR) ** i for i in powers]
+    rows = [key_term_columns(params, u, v, x) * g1[None, :], jnp.stack([g1, x * g2, -g2])]
+    if curved:
+        rows.append(jnp.stack(curved))
+    return jnp.concatenate(rows, axis=0).T, yc
+
+
+def _unpack(theta, orders: Orders, degree: int):
+    size = orders.size
+    params = CascadeParams.from_theta(theta[:size], orders, check=False)
+    q1 = degree - 1
+    nd = GeneralBacklash(
+        params.cL, params.mR, params.cR, theta[size : size + q1], theta[size + q1 :]
+    )
+    return params, nd
+
+
+def _theta(params: CascadeParams, nd: GeneralBacklash):
+    return jnp.concatenate([params.to_theta(), nd.curveL, nd.curveR])
+
+
+@filter_jit
+def _iterate(u, y, orders: Orders, degree: int, max_iterations: int, tol, divergence_bound):
+    dtype = u.dtype
+    init = initial_guess(orders, jnp.min(u), jnp.max(u), dtype)
+    vector, singular, cost = first_iteration(init, u, y)
+    params = CascadeParams.from_vector(vector, orders, check=False)
+    nd = GeneralBacklash.straight(params, degree)
+
+    def step(carry):
+        params, nd, _, _, k, _ = carry
+        phi, yc = general_regression(params, nd, u, y)
+        theta, singular, cost = solve_normal_equations(phi, yc)
+        new_params, new_nd = _unpack(theta, orders, degree)
+        old = _theta(params, nd)
+        moved = jnp.max(jnp.abs(theta - old) / (1 + jnp.abs(theta)))
+        return new_params, new_nd, singular, cost, k + 1, moved
+
+    def going(carry):
+        params, nd, _, _, k, moved = carry
+        theta = _theta(params, nd)
+        finite = jnp.all(jnp.isfinite(theta)) & (jnp.max(jnp.abs(theta)) <= divergence_bound)
+        return (k < max_iterations) & (moved > tol) & finite
+
+    start = (params, nd, singular, cost, jnp.asarray(1), jnp.asarray(jnp.inf, dtype))
+    params, nd, singular, cost, k, moved = jax.lax.while_loop(going, step, start)
+    theta = _theta(params, nd)
+    finite = jnp.all(jnp.isfinite(theta)) & (jnp.max(jnp.abs(theta)) <= divergence_bound)
+    status = jnp.select(
+        [~finite, singular, moved <= tol],
+        [Status.diverged, Status.singular, Status.converged],
+        Status.max_iterations,
+    )
+    return KeyTermGeneral(params, nd, status.astype(jnp.int32), k, cost)
+
+
+def key_term_general(
+    u,
+    y,
+    orders: Orders,
+    degree: int,
+    *,
+    max_iterations: int = 200,
+    tol: float = 1e-9,
+    divergence_bound: float = 1e6,
+) -> KeyTermGeneral:
+    """The key-term iteration of the note (module docstring) on one record: the cascade
+    of `orders` with a general backlash of `degree`, from the paper's initial values.
+    Never raises on a bad record's numbers: the status says what happened."""
+    u, y = record(u, y, orders=orders, where="key_term_general")
+    return _iterate(u, y, orders, int(degree), int(max_iterations), tol, divergence_bound)
