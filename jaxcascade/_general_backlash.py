@@ -110,6 +110,10 @@ class GeneralBacklash(eqx.Module):
     def straight(cls, params: CascadeParams, degree: int = 1) -> GeneralBacklash:
         """The straight backlash of `params` (`cL`, `mR`, `cR`) as a general backlash of
         `degree` with zero curvature."""
+        if not 1 <= int(degree) <= MAX_DEGREE:
+            raise ValueError(
+                f"GeneralBacklash: the branch degree must be 1 to {MAX_DEGREE}, got {degree}."
+            )
         dtype = jnp.asarray(params.mR).dtype
         zero = jnp.zeros((degree - 1,), dtype)
         return cls(
@@ -122,14 +126,6 @@ class GeneralBacklash(eqx.Module):
         cL, mR, cR = (jnp.asarray(c, x.dtype) for c in (self.cL, self.mR, self.cR))
         left = _plus(x + cL, _curvature(self.curveL, x + cL))
         return left, _plus(mR * (x - cR), _curvature(self.curveR, x - cR))
-
-    def slopes(self, x) -> tuple[Array, Array]:
-        """`(fL'(x), fR'(x))`."""
-        x = jnp.asarray(x)
-        flat = jnp.ravel(x)
-        left = jax.vmap(jax.grad(lambda t: self.branches(t)[0]))(flat)
-        right = jax.vmap(jax.grad(lambda t: self.branches(t)[1]))(flat)
-        return left.reshape(x.shape), right.reshape(x.shape)
 
 
 def _curvature(curve, s):

@@ -65,6 +65,9 @@ def test_zero_curvature_of_a_higher_degree_is_the_straight_backlash():
     cubic = GeneralBacklash.straight(params, degree=3)
     assert cubic.degree == 3
     np.testing.assert_allclose(general_backlash(cubic, x), backlash(params, x), rtol=0, atol=1e-14)
+    for degree in (0, 5):
+        with pytest.raises(ValueError, match="degree must be 1 to 4"):
+            GeneralBacklash.straight(params, degree)
 
 
 @pytest.mark.parametrize("name", sorted(GENERAL_EXAMPLES))
