@@ -250,8 +250,8 @@ def main(argv=None) -> int:
                 "",
                 f"`{command.strip()}`, commit {_commit()}, {date}. {args.records} records per "
                 f"example, inputs from `PRNGKey({args.seed})` on; from the paper's initial "
-                "values (curvature 0), at most 200 steps, converged when no element of theta "
-                "moves by more than 1e-9 (1 + |theta|).",
+                "values (curvature 0), at most 200 steps, stopped by `Literal`'s rules and "
+                "settings (`_literal.stopping_rule`, `_literal.cycle_detection`).",
                 "",
                 "general1 and general2 at degree 3; the 2016 Examples 1 and 2 at degree 1 "
                 "(their straight backlash), for the iteration counts. Records per status, "

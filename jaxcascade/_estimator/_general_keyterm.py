@@ -17,15 +17,19 @@ parameter: the cascade's theta (eq. 18) followed by `mL_2..q` and `mR_2..q`.
 Like `Literal` it starts from the paper's initial values (`_literal.initial_guess`,
 curvature 0) with the paper's first iteration (`_literal.first_iteration`: v ~ u,
 x ~ y; with curvature 0 the general backlash's switches are the straight one's), then
-repeats the step. Statuses:
+repeats the step, and it stops by `Literal`'s rules (`_literal.stopping_rule`,
+`_literal.cycle_detection`, the same settings and defaults). Statuses:
 
-- `singular`: the last step's regression was rank deficient (a regime never visited,
+- `converged`: every element of theta moved by less than `se_tol` standard errors plus
+  `tol (1 + |theta|)`, or the cost J settled, or the iterates circle within a few such
+  tolerances (an oscillating approach);
+- `cycled`: the iterates revisit an earlier one (period 2 to `cycle_period`) farther
+  apart: the switching pattern cycles between neighbouring estimates (usable, as
+  `Literal`'s);
+- `singular`: the final step's regression was rank deficient (a regime never visited,
   columns dependent at the estimate): the data do not determine every parameter;
-- `converged`: otherwise, where a step changed no element of theta by more than
-  `tol (1 + |theta|)`;
 - `diverged`: an estimate became non-finite or larger than `divergence_bound`;
-- `max_iterations`: none of these within `max_iterations` steps (under noise the
-  switching pattern can cycle between neighbouring estimates; no cycle detection yet).
+- `max_iterations`: none of these within `max_iterations` steps.
 
 Noise-free, the truth is a fixed point (`tests/test_general_backlash.py`); the
 iteration counts on the note's examples are in `results/general_backlash/keyterm.md`.
@@ -41,11 +45,18 @@ from jaxtyping import Array, Float
 from .._compile import filter_jit
 from .._general_backlash import GeneralBacklash, general_switches
 from .._model import CascadeParams, Orders
-from .._regression import key_term_columns, solve_normal_equations
+from .._regression import key_term_columns, solve_gram
 from .._simulate import linear_block, pwl, shift
 from .._status import Status
 from .._validate import record
-from ._literal import first_iteration, initial_guess
+from ._literal import (
+    _RUNNING,
+    cycle_detection,
+    first_iteration,
+    initial_guess,
+    standard_errors,
+    stopping_rule,
+)
 
 
 class KeyTermGeneral(eqx.Module):
@@ -93,37 +104,51 @@ def _theta(params: CascadeParams, nd: GeneralBacklash):
 
 
 @filter_jit
-def _iterate(u, y, orders: Orders, degree: int, max_iterations: int, tol, divergence_bound):
+def _iterate(u, y, orders: Orders, degree: int, max_iterations: int, settings):
+    tol, se_tol, cost_tol, cycle_period, divergence_bound = settings
     dtype = u.dtype
+    n = u.shape[0]
     init = initial_guess(orders, jnp.min(u), jnp.max(u), dtype)
     vector, singular, cost = first_iteration(init, u, y)
     params = CascadeParams.from_vector(vector, orders, check=False)
     nd = GeneralBacklash.straight(params, degree)
+    theta = _theta(params, nd)
+    history = (
+        jnp.broadcast_to(theta, (max_iterations + 1, theta.shape[0]))
+        .at[0]
+        .set(_theta(init, GeneralBacklash.straight(init, degree)))
+    )
+
+    def usable(theta):
+        return jnp.all(jnp.isfinite(theta)) & (jnp.max(jnp.abs(theta)) <= divergence_bound)
 
     def step(carry):
-        params, nd, _, _, k, _ = carry
+        theta, history, _, cost, k, _ = carry
+        params, nd = _unpack(theta, orders, degree)
         phi, yc = general_regression(params, nd, u, y)
-        theta, singular, cost = solve_normal_equations(phi, yc)
-        new_params, new_nd = _unpack(theta, orders, degree)
-        old = _theta(params, nd)
-        moved = jnp.max(jnp.abs(theta - old) / (1 + jnp.abs(theta)))
-        return new_params, new_nd, singular, cost, k + 1, moved
+        new, singular, inverse = solve_gram(phi.T @ phi, phi.T @ yc)
+        new_cost = jnp.mean((yc - phi @ new) ** 2)
+        se = standard_errors(new_cost, inverse, n, new.shape[0])
+        converged, tolerance = stopping_rule(new, theta, se, cost, new_cost, tol, se_tol, cost_tol)
+        revisited, tight, _ = cycle_detection(new, history, k, tolerance, cycle_period)
+        revisited = ~converged & revisited
+        status = jnp.select(
+            [~usable(new), converged | (revisited & tight), revisited],
+            [Status.diverged, Status.converged, Status.cycled],
+            jnp.where(k + 1 >= max_iterations, Status.max_iterations, _RUNNING),
+        )
+        history = history.at[k + 1].set(new)
+        return new, history, singular, new_cost, k + 1, status
 
-    def going(carry):
-        params, nd, _, _, k, moved = carry
-        theta = _theta(params, nd)
-        finite = jnp.all(jnp.isfinite(theta)) & (jnp.max(jnp.abs(theta)) <= divergence_bound)
-        return (k < max_iterations) & (moved > tol) & finite
-
-    start = (params, nd, singular, cost, jnp.asarray(1), jnp.asarray(jnp.inf, dtype))
-    params, nd, singular, cost, k, moved = jax.lax.while_loop(going, step, start)
-    theta = _theta(params, nd)
-    finite = jnp.all(jnp.isfinite(theta)) & (jnp.max(jnp.abs(theta)) <= divergence_bound)
-    status = jnp.select(
-        [~finite, singular, moved <= tol],
-        [Status.diverged, Status.singular, Status.converged],
-        Status.max_iterations,
+    status = jnp.where(usable(theta), _RUNNING, Status.diverged)
+    start = (theta, history, singular, cost, jnp.asarray(1), status)
+    theta, _, singular, cost, k, status = jax.lax.while_loop(
+        lambda carry: carry[-1] == _RUNNING, step, start
     )
+    # judged on the final estimate: from a rank-deficient regression the data do not
+    # determine every parameter
+    status = jnp.where((status != Status.diverged) & singular, Status.singular, status)
+    params, nd = _unpack(theta, orders, degree)
     return KeyTermGeneral(params, nd, status.astype(jnp.int32), k, cost)
 
 
@@ -134,11 +159,16 @@ def key_term_general(
     degree: int,
     *,
     max_iterations: int = 200,
-    tol: float = 1e-9,
+    tol: float = 1e-8,
+    se_tol: float = 1e-3,
+    cost_tol: float = 1e-12,
+    cycle_period: int = 16,
     divergence_bound: float = 1e6,
 ) -> KeyTermGeneral:
     """The key-term iteration of the note (module docstring) on one record: the cascade
-    of `orders` with a general backlash of `degree`, from the paper's initial values.
-    Never raises on a bad record's numbers: the status says what happened."""
+    of `orders` with a general backlash of `degree`, from the paper's initial values,
+    with `Literal`'s stopping settings (`_literal.voros`). Never raises on a bad
+    record's numbers: the status says what happened."""
     u, y = record(u, y, orders=orders, where="key_term_general")
-    return _iterate(u, y, orders, int(degree), int(max_iterations), tol, divergence_bound)
+    settings = (tol, se_tol, cost_tol, int(cycle_period), divergence_bound)
+    return _iterate(u, y, orders, int(degree), int(max_iterations), settings)
