@@ -35,18 +35,8 @@ from __future__ import annotations
 import argparse
 import datetime
 import pathlib
-import subprocess
 import sys
 import time
-
-
-def _commit() -> str:
-    try:
-        return subprocess.run(
-            ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=True
-        ).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
 
 
 def main(argv=None) -> int:
@@ -62,6 +52,7 @@ def main(argv=None) -> int:
     import jax.numpy as jnp
     import numpy as np
     import pandas as pd
+    from bench_history import commit  # the short hash, "-dirty" with package changes
     from loop_speed import markdown  # a pipe table without an optional dependency
 
     import jaxcascade as jc
@@ -199,7 +190,7 @@ def main(argv=None) -> int:
     lines = [
         "# General-backlash examples on their records",
         "",
-        f"`{command.strip()}`, commit {_commit()}, {date}. Seed {args.seed}, noise-free.",
+        f"`{command.strip()}`, commit {commit()}, {date}. Seed {args.seed}, noise-free.",
         "",
         "Branches fL(x) = (x + cL) + sum mL_i (x + cL)^i and fR(x) = mR (x - cR) + "
         "sum mR_i (x - cR)^i, i = 2..q (`curveL` = mL_2..mL_q, `curveR` = mR_2..mR_q). "
@@ -225,7 +216,7 @@ def main(argv=None) -> int:
             [
                 "# Output-error estimates with curved branches, noise-free",
                 "",
-                f"`{command.strip()}`, commit {_commit()}, {date}, {device_description()}. "
+                f"`{command.strip()}`, commit {commit()}, {date}, {device_description()}. "
                 f"Records as in `examples.md` (seed {args.seed}), robust key "
                 f"`PRNGKey({args.seed + 1})`.",
                 "",
@@ -248,7 +239,7 @@ def main(argv=None) -> int:
             [
                 "# The key-term iteration with curved branches, noise-free",
                 "",
-                f"`{command.strip()}`, commit {_commit()}, {date}. {args.records} records per "
+                f"`{command.strip()}`, commit {commit()}, {date}. {args.records} records per "
                 f"example, inputs from `PRNGKey({args.seed})` on; from the paper's initial "
                 "values (curvature 0), at most 200 steps, stopped by `Literal`'s rules and "
                 "settings (`_literal.stopping_rule`, `_literal.cycle_detection`).",

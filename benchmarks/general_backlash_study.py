@@ -29,18 +29,8 @@ from __future__ import annotations
 import argparse
 import datetime
 import pathlib
-import subprocess
 import sys
 import time
-
-
-def _commit() -> str:
-    try:
-        return subprocess.run(
-            ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=True
-        ).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
 
 
 def main(argv=None) -> int:
@@ -57,6 +47,7 @@ def main(argv=None) -> int:
     import jax.numpy as jnp
     import numpy as np
     import pandas as pd
+    from bench_history import commit  # the short hash, "-dirty" with package changes
     from loop_speed import markdown  # a pipe table without an optional dependency
 
     import jaxcascade as jc
@@ -170,7 +161,7 @@ def main(argv=None) -> int:
     lines = [
         "# The general-backlash estimators under noise: bias, spread, efficiency",
         "",
-        f"`{command.strip()}`, commit {_commit()}, {date}, {device_description()}, "
+        f"`{command.strip()}`, commit {commit()}, {date}, {device_description()}, "
         f"{time.perf_counter() - started:.0f} s. {args.records} realisations per example at "
         f"SNR {args.snr:g}, one input (`PRNGKey({args.seed})`) for all, noise from "
         f"`PRNGKey({args.seed + 1})` on.",
