@@ -140,7 +140,9 @@ def _iterate(u, y, orders: Orders, degree: int, max_iterations: int, settings):
         history = history.at[k + 1].set(new)
         return new, history, singular, new_cost, k + 1, status
 
-    status = jnp.where(usable(theta), _RUNNING, Status.diverged)
+    # the first iteration is iteration 1: with `max_iterations` 1 it is the estimate
+    running = jnp.where(max_iterations <= 1, Status.max_iterations, _RUNNING)
+    status = jnp.where(usable(theta), running, Status.diverged)
     start = (theta, history, singular, cost, jnp.asarray(1), status)
     theta, _, singular, cost, k, status = jax.lax.while_loop(
         lambda carry: carry[-1] == _RUNNING, step, start
