@@ -120,6 +120,19 @@ class GeneralBacklash(eqx.Module):
             jnp.asarray(params.cL), jnp.asarray(params.mR), jnp.asarray(params.cR), zero, zero
         )
 
+    @classmethod
+    def unchecked(cls, cL, mR, cR, curveL, curveR) -> GeneralBacklash:
+        """The block without the construction checks: for values an optimiser is trying
+        (the loop's `general_backlash` effect), judged afterwards on a record's range
+        (`branch_report`)."""
+        shape = jnp.zeros((jnp.shape(curveL)[-1],))
+        template = cls(jnp.zeros(()), jnp.ones(()), jnp.zeros(()), shape, shape)
+        return eqx.tree_at(
+            lambda nd: (nd.cL, nd.mR, nd.cR, nd.curveL, nd.curveR),
+            template,
+            (cL, mR, cR, curveL, curveR),
+        )
+
     def branches(self, x) -> tuple[Array, Array]:
         """`(fL(x), fR(x))` of the module docstring."""
         x = jnp.asarray(x)
@@ -172,11 +185,12 @@ def general_switches(nd: GeneralBacklash, x, y_prev) -> tuple[Array, Array]:
     return g1, g2
 
 
-def general_backlash(nd: GeneralBacklash, x: Float[Array, " T"]) -> Float[Array, " T"]:
+def general_backlash(nd: GeneralBacklash, x: Float[Array, " T"], y_prev=None) -> Float[Array, " T"]:
     """The general backlash on the signal `x` as a `lax.scan`, its state starting at
-    y = 0. At degree 1 every expression is `_simulate.backlash`'s: the same output bit
-    for bit."""
+    `y_prev` (the output before `x(0)`; default 0, rest). At degree 1 every expression
+    is `_simulate.backlash`'s: the same output bit for bit."""
     cL, mR, cR = (jnp.asarray(c, x.dtype) for c in (nd.cL, nd.mR, nd.cR))
+    y0 = jnp.zeros((), x.dtype) if y_prev is None else jnp.asarray(y_prev, x.dtype)
 
     def step(y_prev, x_t):
         g1, g2 = general_switches(nd, x_t, y_prev)
@@ -188,7 +202,7 @@ def general_backlash(nd: GeneralBacklash, x: Float[Array, " T"]) -> Float[Array,
         y_t = y_t + (1 - g1) * (1 - g2) * y_prev
         return y_t, y_t
 
-    _, y = jax.lax.scan(step, jnp.zeros((), x.dtype), x)
+    _, y = jax.lax.scan(step, y0, x)
     return y
 
 

@@ -48,8 +48,9 @@ from jax.flatten_util import ravel_pytree
 from jaxtyping import Array, Float
 
 from ._compile import exported, pad
-from ._effects._base import EffectState, ExtendedModel, recent
+from ._effects._base import EffectState, ExtendedModel, backlash_of, recent
 from ._estimator._refine import least_squares
+from ._general_backlash import general_backlash
 from ._metrics import score
 from ._model import CascadeParams
 from ._simulate import _poles_blocked, _poles_scan, backlash_switches, pwl
@@ -136,7 +137,11 @@ def simulate_from(model: ExtendedModel, u, state: ModelState, at=None):
     if model.cascade:
         v = pwl(model.params, u)
         x = linear_block_from(model.params, v, c.v_past, c.x_past)
-        y_cascade = backlash_from(model.params, x, c.y_prev)
+        nd = backlash_of(model)
+        if nd is None:
+            y_cascade = backlash_from(model.params, x, c.y_prev)
+        else:  # an effect's curved backlash (`_effects._curved`)
+            y_cascade = general_backlash(nd, x, c.y_prev)
     else:  # an effect replaced the cascade (`ExtendedModel.cascade`): its state stays put
         v, x = jnp.zeros_like(u), u
         y_cascade = jnp.zeros_like(u) + 0 * c.y_prev

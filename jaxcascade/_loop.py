@@ -56,12 +56,14 @@ from ._effects import (
     ExtendedModel,
     OutputOffset,
     Start,
+    backlash_of,
     plain,
     simulate_with_switches,
 )
 from ._efficiency import standard_errors
 from ._estimator._refine import from_unconstrained, least_squares, to_unconstrained
 from ._estimator._robust import Robust
+from ._general_backlash import general_switches
 from ._initial_state import initialise
 from ._loop_checkpoint import (
     Checkpoints,
@@ -387,7 +389,11 @@ def evaluate(
         u_r, y_r = np.asarray(u_r), np.asarray(y_r)
         p = model.params
         previous = np.concatenate([np.zeros(1, y_cascade.dtype), y_cascade[:-1]])
-        g1, g2 = backlash_switches(x, previous, float(p.cL), float(p.mR), float(p.cR))
+        nd = backlash_of(model)
+        if nd is None:
+            g1, g2 = backlash_switches(x, previous, float(p.cL), float(p.mR), float(p.cR))
+        else:
+            g1, g2 = general_switches(nd, jnp.asarray(x), jnp.asarray(previous))
         regime = regime_from_switches(np.asarray(g1), np.asarray(g2))
         window_sim = None
         if n > 0:
@@ -947,10 +953,25 @@ def _fit_candidate(name, model, us, ys, records, action="add"):
         fitted, _, label = fit_parallel(model, effect, us, ys)
         return fitted, label
     best = None
+    samples = sum(np.shape(u)[0] for u in us)
     for start in effect.starts_records(model, records):
         fitted, cost, _ = refit(model, start, us, ys, effect.refine_steps)
-        if best is None or cost < best[1]:
-            best = (fitted, cost, start.label)
+        if fitted.effects and fitted.effects[-1].admissible(fitted, us) is not None:
+            continue  # not a model of its kind on these records (a branch that turns)
+        # Starts of one effect with more parameters (a higher branch degree) win only
+        # where they lower the cost by more than their parameters are worth (BIC); among
+        # starts of one size this is the smallest cost.
+        size = start.vectors.shape[1] + sum(
+            int(np.size(leaf)) // start.vectors.shape[0]
+            for leaf in jax.tree_util.tree_leaves(start.effect)
+        )
+        criterion = (
+            samples * np.log(max(cost, 1e-300) / samples) + size * np.log(samples)
+            if np.isfinite(cost)
+            else np.inf
+        )
+        if best is None or criterion < best[1]:
+            best = (fitted, criterion, start.label)
     if best is None:
         return None  # no start on these records (a segment where the input never goes)
     return best[0], best[2]

@@ -30,6 +30,7 @@ EFFECTS = (
     "prandtl_ishlinskii",
     "dahl_friction",
     "input_backlash",
+    "general_backlash",
 )
 
 # the loop's noise model, considered beside the effects

@@ -1,6 +1,8 @@
 """Records with an effect the declared model lacks, for tests and benchmarks
 (`benchmarks/effects_loop.py`): Example 1 (declared orders 2,2,2,2) with one effect of
-the library present, and the AR coefficient of the output noise (`None`: white)."""
+the library present, and the AR coefficient of the output noise (`None`: white); and
+the general-backlash examples' records (`CURVED`, `benchmarks/general_backlash_loop.py`):
+the cascade declared with straight branches, the record's curved."""
 
 from __future__ import annotations
 
@@ -9,6 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._effects import (
+    CurvedBacklash,
     ExtendedModel,
     InputDelay,
     OutputDrift,
@@ -19,6 +22,7 @@ from ._effects import (
     simulate_extended,
 )
 from ._examples import example
+from ._general_backlash import general_example
 from ._model import CascadeParams
 from ._noise import ARNoise
 from ._simulate import uniform_input
@@ -60,6 +64,22 @@ UNDECLARED = {
     "output_drift": lambda: (_with(OutputDrift(_scalar(0.2))), None),
     "output_feedthrough": lambda: (_with(OutputFeedthrough(_scalar(-0.5))), None),
     None: lambda: (plain(_example1()), None),
+}
+
+
+def _curved(name):
+    ex = general_example(name)
+    dtype = jnp.result_type(float)
+    curves = (jnp.asarray(c, dtype) for c in (ex.curveL, ex.curveR))
+    return ExtendedModel(ex.params(), (CurvedBacklash(*curves),), ARNoise.white())
+
+
+# The general-backlash examples (`_general_backlash.GENERAL_EXAMPLES`) as extended models
+# (the curved branches as the loop's `general_backlash` effect), with their declared
+# orders: `(model, orders)`.
+CURVED = {
+    name: (lambda name=name: (_curved(name), general_example(name).orders))
+    for name in ("general1", "general2")
 }
 
 

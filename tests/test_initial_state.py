@@ -13,6 +13,7 @@ from jaxcascade._effects import (
     EFFECTS,
     BacklashFriction,
     BacklashFrictionContacts,
+    CurvedBacklash,
     DahlFriction,
     DynamicsOrder,
     ExtendedModel,
@@ -60,6 +61,7 @@ INSTANCES = {
     ),
     "dahl_friction": DahlFriction(*_a(4.0, -0.7)),
     "input_backlash": InputBacklash(*_a(0.25)),
+    "general_backlash": CurvedBacklash(jnp.array([0.0, 0.04]), jnp.array([0.0, 0.05])),
 }
 
 
@@ -124,8 +126,13 @@ def _non_rest(model, u):
 
 @pytest.mark.parametrize(
     "effects",
-    [(), (INSTANCES["backlash_friction"],), (INSTANCES["input_backlash"],)],
-    ids=["cascade", "backlash_friction", "input_backlash"],
+    [
+        (),
+        (INSTANCES["backlash_friction"],),
+        (INSTANCES["input_backlash"],),
+        (INSTANCES["general_backlash"],),
+    ],
+    ids=["cascade", "backlash_friction", "input_backlash", "general_backlash"],
 )
 def test_initialise_recovers_a_state_other_than_rest(effects):
     model = _model(*effects)

@@ -164,6 +164,7 @@ def _markdown(report: dict, command: str) -> str:
 def _final_model(model, errors: dict, scaling) -> dict:
     """The report's final model: its structure, its equations and every estimate with its
     standard error (model units), the cascade's also in the records' units."""
+    from .._effects import backlash_of
     from .._loop import model_estimates
 
     values = model_estimates(model)
@@ -188,7 +189,7 @@ def _final_model(model, errors: dict, scaling) -> dict:
     ]
     return {
         "structure": model.structure(),
-        "equations": _equations(model.params) if model.cascade else [],
+        "equations": _equations(model.params, backlash_of(model)) if model.cascade else [],
         "effects": [e.name for e in model.effects],
         "noise_order": int(model.noise.order),
         "scaling": scaling.to_dict(),
@@ -196,9 +197,10 @@ def _final_model(model, errors: dict, scaling) -> dict:
     }
 
 
-def _equations(params) -> list[str]:
+def _equations(params, curved=None) -> list[str]:
     """The cascade's three blocks with the estimates written in (model units;
-    docs/model.md gives the general form)."""
+    docs/model.md gives the general form); `curved`: the general backlash an effect put
+    in place of the straight one (`_effects.backlash_of`), or None."""
     p = params.to_dict()
     o = params.orders
 
@@ -220,10 +222,30 @@ def _equations(params) -> list[str]:
         f"NS (static, piecewise linear): v = f(u), right of zero {slopes('R', o.nR)}; "
         f"left of zero {slopes('L', o.nL)}",
         f"LD (linear): x(t) = {numerator}{denominator}",
-        f"ND (backlash): y(t) = x(t) + {p['cL']:.4g} where that is below y(t-1); "
-        f"y(t) = {p['mR']:.4g} (x(t) - {p['cR']:.4g}) where that is above y(t-1); "
-        "else y(t) = y(t-1)",
+        _backlash_equation(p, curved),
     ]
+
+
+def _backlash_equation(p: dict, curved) -> str:
+    import numpy as np
+
+    left, right = f"x(t) + {p['cL']:.4g}", f"{p['mR']:.4g} (x(t) - {p['cR']:.4g})"
+    name = "backlash"
+    if curved is not None:
+        name = f"general backlash, degree {curved.degree}"
+        for side, curve, s in (
+            ("L", np.asarray(curved.curveL), f"(x(t) + {p['cL']:.4g})"),
+            ("R", np.asarray(curved.curveR), f"(x(t) - {p['cR']:.4g})"),
+        ):
+            terms = "".join(
+                f" {'-' if c < 0 else '+'} {abs(c):.4g} {s}^{i}"
+                for i, c in enumerate(curve, start=2)
+            )
+            left, right = (left + terms, right) if side == "L" else (left, right + terms)
+    return (
+        f"ND ({name}): y(t) = {left} where that is below y(t-1); "
+        f"y(t) = {right} where that is above y(t-1); else y(t) = y(t-1)"
+    )
 
 
 def _final_model_lines(final: dict) -> list[str]:

@@ -1,5 +1,6 @@
 """The effect library and its registry (`_base`: the interface and the cascade's
-structural and output effects; `_hysteresis`: friction and hysteresis paths).
+structural and output effects; `_hysteresis`: friction and hysteresis paths; `_curved`:
+the curved output backlash).
 
 To add an effect: its class in a module here, and its entry in `EFFECTS`."""
 
@@ -34,6 +35,9 @@ from ._base import (
     Start as Start,
 )
 from ._base import (
+    backlash_of as backlash_of,
+)
+from ._base import (
     plain as plain,
 )
 from ._base import (
@@ -41,6 +45,9 @@ from ._base import (
 )
 from ._base import (
     simulate_with_switches as simulate_with_switches,
+)
+from ._curved import (
+    CurvedBacklash as CurvedBacklash,
 )
 from ._hysteresis import (
     BacklashFriction as BacklashFriction,
@@ -77,9 +84,11 @@ EFFECTS: dict[str, type[Effect]] = {
         PrandtlIshlinskii,
         DahlFriction,
         InputBacklash,
+        CurvedBacklash,
     )
 }
-# the hysteresis paths: tried only when the hysteresis residual test failed
+# tried only when a test of their signature failed: the hysteresis paths and the curved
+# backlash
 HYSTERESIS = tuple(name for name, effect in EFFECTS.items() if effect.needs_signature)
 # the effects that change the cascade's orders (nothing to change without a cascade)
 STRUCTURAL = ("dynamics_order", "pwl_segment")

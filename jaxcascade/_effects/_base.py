@@ -29,6 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from .._general_backlash import GeneralBacklash, general_signals
 from .._model import CascadeParams, Orders
 from .._noise import ARNoise
 from .._simulate import signals
@@ -82,6 +83,16 @@ class Effect(eqx.Module):
 
     def parallel_with_state(self, u, state, at):
         return self.parallel(u), state
+
+    def backlash(self, params: CascadeParams) -> GeneralBacklash | None:
+        """The block that replaces the cascade's straight backlash (built on its `cL`,
+        `mR`, `cR`), or `None` (the default) for an effect that leaves it alone."""
+        return None
+
+    def admissible(self, model: ExtendedModel, us) -> str | None:
+        """Why a fitted `model` with this effect is not a model of its kind on the input
+        records `us` (one phrase), or None (the default) where it is."""
+        return None
 
     def state_range(self, state) -> tuple[Array, Array] | None:
         """Bounds `(low, high)` of `state.free` (an operator's admissible positions), for
@@ -189,7 +200,9 @@ class ExtendedModel(eqx.Module):
         chain = ["u", *inputs]
         if self.cascade:
             o = self.orders
-            chain += [f"pwl({o.nR},{o.nL})", f"linear({o.r},{o.p})", "backlash"]
+            nd = backlash_of(self)
+            block = "backlash" if nd is None else f"general_backlash({nd.degree})"
+            chain += [f"pwl({o.nR},{o.nL})", f"linear({o.r},{o.p})", block]
             line = " -> ".join(chain)
             if paths:
                 line = f"{line} (+ {' + '.join(f'{p}(u)' for p in paths)})"
@@ -210,6 +223,16 @@ class ExtendedModel(eqx.Module):
         return tuple(effect.name for effect in self.effects)
 
 
+def backlash_of(model: ExtendedModel) -> GeneralBacklash | None:
+    """The general backlash an effect of `model` puts in place of the cascade's straight
+    one (`Effect.backlash`), or None: the cascade's own."""
+    for effect in model.effects:
+        nd = effect.backlash(model.params)
+        if nd is not None:
+            return nd
+    return None
+
+
 def plain(params: CascadeParams) -> ExtendedModel:
     """The declared cascade with no effect added and white noise."""
     return ExtendedModel(params, (), ARNoise.white(params.mR.dtype))
@@ -228,7 +251,8 @@ def simulate_with_switches(model: ExtendedModel, u):
     for effect in model.effects:
         u = effect.input(u)
     if model.cascade:
-        inner = signals(model.params, u)
+        nd = backlash_of(model)
+        inner = signals(model.params, u) if nd is None else general_signals(model.params, nd, u)
         x, y = inner.x, inner.y
     else:
         x, y = u, jnp.zeros_like(u)
