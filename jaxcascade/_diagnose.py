@@ -282,7 +282,7 @@ def hysteresis_test(
 
 _WHITENESS = ("autocorrelation", "spectrum")
 _INDEPENDENCE = ("cross_correlation", "e_eu", "u2_e", "u2_e2")
-_CONDITIONAL = ("mean", "regime", "level", "time")
+_CONDITIONAL = ("mean", "regime", "branch", "level", "time")
 _HYSTERESIS = ("hysteresis",)
 
 
@@ -292,7 +292,8 @@ class ResidualTests(_Serialisable):
 
     Tests: `autocorrelation` (phi_ee), `cross_correlation` (phi_ue), `e_eu` (phi_e(eu)),
     `u2_e` (phi_u2'e), `u2_e2` (phi_u2'e2), `spectrum`, `mean`, `regime` (`None` without a
-    regime array), `level`, `time`. Each has `passed` at level `alpha`. The summaries
+    regime array), `branch` (`None` without the regime and the model's backlash output),
+    `level`, `time`. Each has `passed` at level `alpha`. The summaries
     `whiteness_ok` (autocorrelation, spectrum), `independence_ok` (the four input
     correlation tests) and `conditional_ok` (mean, regime, level, time) are Bonferroni
     over their group, so each has a false-alarm rate of at most `alpha`; so is `ok`, over
@@ -313,6 +314,7 @@ class ResidualTests(_Serialisable):
     level: GroupTest
     time: DriftTest
     hysteresis: HysteresisTest | None = None
+    branch: GroupTest | None = None
 
     def tests(self) -> dict[str, Any]:
         """Every test present, by name."""
@@ -576,6 +578,45 @@ def regime_test(e, regime, alpha: float = 0.05, hac_lags: int | None = None) -> 
     return group_test("regime", e, regime.astype(int), labels, [0, 1, 2], alpha, hac_lags)
 
 
+BRANCH_BINS = 5
+
+
+def branch_test(
+    e, regime, level, n_bins: int = BRANCH_BINS, alpha: float = 0.05, hac_lags=None
+) -> GroupTest | None:
+    """Residual per level of the model's output along each moving branch of the backlash:
+    the samples pushed down onto the left branch (regime 1) and pushed up onto the right
+    one (regime 2), each branch's in `n_bins` bins between quantiles of the model's
+    backlash output `level` there; held samples are not tested (None where neither
+    branch holds `2 n_bins` samples). A straight line through a curved branch leaves a
+    residual mean that changes with the level along it (the signature of the general
+    backlash, `_effects._curved`)."""
+    e, level, regime = (np.asarray(a) for a in (e, level, regime))
+    if level.shape != e.shape:
+        raise ValueError(f"Level has shape {level.shape} but the residual {e.shape}; align them.")
+    groups = np.full(e.shape, -1)
+    labels, positions = [], []
+    for code, side in ((1, "left"), (2, "right")):
+        on = np.flatnonzero(regime == code)
+        if on.size < 2 * n_bins:
+            continue  # a branch the record hardly moves along
+        edges = np.unique(np.quantile(level[on], np.linspace(0.0, 1.0, n_bins + 1)))
+        count = max(edges.size - 1, 1)
+        bins = np.clip(np.searchsorted(edges, level[on], side="right") - 1, 0, count - 1)
+        groups[on] = len(labels) + bins
+        for i in range(count):
+            hi = edges[min(i + 1, edges.size - 1)]
+            labels.append(f"{side} [{edges[i]:.3g}, {hi:.3g}]")
+            inside = level[on][bins == i]
+            positions.append(float(np.mean(inside)) if inside.size else float(edges[i]))
+    moving = groups >= 0
+    if not labels:
+        return None
+    return group_test(
+        "branch", e[moving], groups[moving], tuple(labels), positions, alpha, hac_lags
+    )
+
+
 def level_test(
     u, e, n_bins: int = 10, alpha: float = 0.05, hac_lags: int | None = None
 ) -> GroupTest:
@@ -689,6 +730,7 @@ def residual_tests(
     sample_period: float = 1.0,
     hac_lags: int | None = None,
     hysteresis: bool = True,
+    level=None,
 ) -> ResidualTests:
     """Every residual test of a fitted model on one validation record.
 
@@ -700,7 +742,9 @@ def residual_tests(
     - `max_lag`: lags of the correlation tests; `alpha`: level of each test;
       `n_bins`: input-level bins; `n_blocks`: time blocks; `sample_period`: for the
       spectrum's frequency axis; `hac_lags`: Newey-West lags (default `4 (N/100)^(2/9)`);
-      `hysteresis`: also run `hysteresis_test`.
+      `hysteresis`: also run `hysteresis_test`; `level`: optional
+      `Float[np.ndarray, " N"]`, the model's backlash output, for `branch_test` (with
+      `regime`).
     """
     u = np.asarray(u, dtype=np.float64)
     e = np.asarray(e, dtype=np.float64)
@@ -751,4 +795,9 @@ def residual_tests(
         level=level_test(u, e, n_bins, alpha, hac_lags),
         time=drift_test(e, n_blocks, alpha, hac_lags),
         hysteresis=hysteresis_test(u, e, alpha=alpha, hac_lags=hac_lags) if hysteresis else None,
+        branch=(
+            None
+            if regime is None or level is None
+            else branch_test(e, regime, level, alpha=alpha, hac_lags=hac_lags)
+        ),
     )

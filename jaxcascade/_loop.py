@@ -405,14 +405,22 @@ def evaluate(
             scored = y_sim
             window_sim = None if window is None else y_sim[slice(*window)]
         residual = y_r[n:] - scored
-        parts.append((u_r[n:], y_r[n:], residual, regime[n:], y_sim, window_sim, scored))
+        parts.append(
+            (u_r[n:], y_r[n:], residual, regime[n:], y_sim, window_sim, scored, y_cascade[n:])
+        )
     join = (lambda arrays: arrays[0]) if len(parts) == 1 else np.concatenate
     u_s, y_s, residual, regime, y_sim = (join([q[k] for q in parts]) for k in range(5))
     scored = join([q[6] for q in parts])
+    level = join([q[7] for q in parts])
     innovations = join([innovations_np(model.noise, q[2]) for q in parts])
     error = score(y_s, scored)
     tests = residual_tests(
-        u_s, innovations, regime, sample_period=sample_period, **test_sizes(len(residual))
+        u_s,
+        innovations,
+        regime,
+        sample_period=sample_period,
+        level=level if model.cascade else None,
+        **test_sizes(len(residual)),
     )
     window_error = None
     if window is not None:

@@ -51,7 +51,8 @@ def test_white_noise_false_alarm_rate(input_kind):
     rejections: dict[str, int] = {}
     for seed in range(seeds):
         u, e, regime = _signals(seed, input_kind)
-        tests = residual_tests(u, e, regime, alpha=ALPHA)
+        level = scipy.signal.lfilter([0.2], [1.0, -0.8], u)  # a model output, smooth
+        tests = residual_tests(u, e, regime, alpha=ALPHA, level=level)
         verdicts = {name: test.passed for name, test in tests.tests().items()}
         verdicts |= {"whiteness_ok": tests.whiteness_ok, "independence_ok": tests.independence_ok}
         verdicts |= {"conditional_ok": tests.conditional_ok, "ok": tests.ok}
@@ -59,7 +60,7 @@ def test_white_noise_false_alarm_rate(input_kind):
             rejections[name] = rejections.get(name, 0) + (not passed)
         if seed < 5:  # and a few lags outside the pointwise bound are normal
             assert tests.autocorrelation.bound == pytest.approx(1.96 / np.sqrt(N))
-    assert len(rejections) == 15  # eleven tests (hysteresis included) and four verdicts
+    assert len(rejections) == 16  # twelve tests (hysteresis, branch) and four verdicts
     too_many = {name: count for name, count in rejections.items() if count > limit}
     assert not too_many, f"more than {limit:.0f} of {seeds} white records rejected: {too_many}"
 
@@ -230,3 +231,24 @@ def test_hysteresis_test_passes_on_a_cascade_record():
     tests = residual_tests(np.asarray(u), residual)
     assert tests.hysteresis.passed
     assert "hysteresis" not in tests.failed
+
+
+def test_branch_test_sees_a_mean_that_changes_along_a_branch():
+    # white noise plus, on the right branch only, a residual that is a parabola in the
+    # model's output level (a curved branch seen through a straight line, zero mean over
+    # the branch): the branch test fails, the regime test (one mean per regime) cannot
+    from jaxcascade._diagnose import branch_test
+
+    rng = np.random.default_rng(7)
+    level = rng.uniform(-1.0, 1.0, N)
+    regime = (np.arange(N) // 37) % 3
+    e = 0.5 * rng.standard_normal(N)
+    right = regime == 2
+    e[right] += 0.3 * (level[right] ** 2 - np.mean(level[right] ** 2))
+    tests = residual_tests(rng.uniform(-2, 2, N), e, regime, level=level)
+    assert tests.branch.p_equal < 1e-3 and not tests.ok and tests.failed == ("branch",)
+    assert tests.regime.passed
+    assert tests.branch.labels[0].startswith("left [") and len(tests.branch.labels) == 10
+    # held samples are not tested; without movement there is no test
+    assert branch_test(e, np.zeros(N, int), level) is None
+    assert residual_tests(rng.uniform(-2, 2, N), e, regime).branch is None

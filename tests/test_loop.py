@@ -125,6 +125,7 @@ def test_every_effect_declares_a_signature():
         "spectrum",
         "mean",
         "regime",
+        "branch",
         "level",
         "time",
         "hysteresis",

@@ -9,11 +9,11 @@ cascade. The simulator (`simulate_with_switches`), the initial-state fit
 (`_initial_state.simulate_from`) and the loop's regime signals ask a model for its
 backlash with `backlash_of`.
 
-Its residual signature: a straight line through a curved branch leaves an error that
-depends on the output level along the branch (the `level` test) and differs between the
-branches and the held stretches (`regime`); held stretches at levels the straight line
-misplaces look like hysteresis (`hysteresis`). It is tried only when one of those fails
-(`needs_signature`).
+Its residual signature: a straight line through a curved branch leaves an error whose
+mean changes with the output level along the branch (`_diagnose.branch_test`, the
+`branch` test), and so with the input level (`level`); held stretches at levels the
+straight line misplaces look like hysteresis (`hysteresis`). It is tried only when one
+of those fails (`needs_signature`).
 
 Starts: on the current model's active samples of each branch (its regime signals), the
 residual is regressed on the curvature columns `s^2..s^q` (`s = x + cL` on the left,
@@ -49,7 +49,7 @@ def _signals(model: ExtendedModel, u):
 
 class CurvedBacklash(Effect):
     name: ClassVar[str] = "general_backlash"
-    signature: ClassVar[tuple[str, ...]] = ("level", "regime", "u2_e", "u2_e2", "hysteresis")
+    signature: ClassVar[tuple[str, ...]] = ("branch", "level", "hysteresis")
     description: ClassVar[str] = (
         "curved branches of the output backlash (general backlash, polynomial degree 2-3)"
     )

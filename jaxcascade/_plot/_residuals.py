@@ -68,7 +68,12 @@ def plot_groups(test, ax=None, xlabel: str | None = None):
     colour = _PASS_COLOUR[bool(test.passed)]
     ax.errorbar(x[valid], means[valid], yerr=half[valid], fmt="o", color=colour, capsize=3)
     ax.axhline(0.0, color="k", lw=0.5)
-    default = {"regime": "backlash regime", "level": "input u (bin mean)", "time": "sample"}
+    default = {
+        "regime": "backlash regime",
+        "branch": "model's backlash output on the left / right branch (bin mean)",
+        "level": "input u (bin mean)",
+        "time": "sample",
+    }
     ax.set_xlabel(xlabel or default.get(test.name, test.name))
     ax.set_ylabel("mean residual ± 1.96 se")
     ax.set_title(
@@ -179,7 +184,7 @@ def plot_residual_tests(tests):
         ax = figure.add_subplot(grid[i // 2, i % 2])
         if name == "time":
             plot_drift(test, ax=ax)
-        elif name in ("regime", "level"):
+        elif name in ("regime", "branch", "level"):
             plot_groups(test, ax=ax)
         elif name == "hysteresis":
             plot_hysteresis(test, ax=ax)
