@@ -144,10 +144,13 @@ statuses() {  # issue 35: every estimator's statuses against the truth
     python benchmarks/status_honesty.py --realisations 100 --seed 0
 }
 general() {  # issue 39: the general-backlash examples' branches on their records, their
-    # output-error estimate and the key-term iteration, noise-free and under noise
+    # output-error estimate and the key-term iteration, noise-free and under noise; the
+    # loop's effect
     python benchmarks/general_backlash.py --seed 0 --records 20 --out results/general_backlash
     python benchmarks/general_backlash_study.py --records 50 --snr 25 --seed 0 \
         --out results/general_backlash/study
+    # the loop's general_backlash effect on curved and straight records
+    python benchmarks/general_backlash_loop.py --seeds 10 --out results/general_backlash/loop
 }
 
 all=(bench profile bench_robust speed distributed robust sweeps literal efficiency effects_loop loop
