@@ -15,7 +15,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 export JAXCASCADE_CACHE=${JAXCASCADE_CACHE:-off}   # compile times reported cold
-needs_shared_data=(loop stability backlash inputs nonlinear)
+needs_shared_data=(loop stability backlash inputs nonlinear general_brfd)
 shared_data() {  # the shared folder a step reads
     case $1 in
         nonlinear) echo "${NLB_DATA:-../shared/data/nonlinear_benchmarks}" ;;
@@ -140,6 +140,13 @@ nonlinear() {  # issue 32 (needs ../shared/data): the loop on the community's no
     python benchmarks/nonlinear_benchmarks.py --data "${NLB_DATA:-../shared/data/nonlinear_benchmarks}" \
         --out results/nonlinear_benchmarks
 }
+general_brfd() {  # issue 39, point 5 (needs ../shared/data): the damper's loop, both
+    # directions, with the curved backlash among the candidates of results/brfd
+    rm -rf results/general_backlash/brfd
+    python benchmarks/brfd.py --data "${BRFD_DATA:-../shared/data/brfd}" --out results/general_backlash/brfd \
+        --decimate 16 --init-samples 50 --max-effects 2 --only harmonics+ --jobs 2 \
+        --effects backlash_friction,backlash_friction_contacts,slack_friction,prandtl_ishlinskii,dahl_friction,output_offset,colored_noise,general_backlash
+}
 statuses() {  # issue 35: every estimator's statuses against the truth
     python benchmarks/status_honesty.py --realisations 100 --seed 0
 }
@@ -154,7 +161,7 @@ general() {  # issue 39: the general-backlash examples' branches on their record
 }
 
 all=(bench profile bench_robust speed distributed robust sweeps literal efficiency effects_loop loop
-    stability backlash reproduce recursive inputs noise nonlinear statuses general)
+    stability backlash reproduce recursive inputs noise nonlinear statuses general general_brfd)
 needs() {  # whether step $1 reads ../shared/data
     local s
     for s in "${needs_shared_data[@]}"; do [ "$s" = "$1" ] && return 0; done

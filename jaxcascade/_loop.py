@@ -789,7 +789,10 @@ def model_error_loop(
                 )
             if fit is None:
                 store.save(item, {"round": round_, "name": name, "action": action, "model": None})
-                say(f"  {name:<24} no start on these records; not tried")
+                say(
+                    f"  {name:<24} no start on these records, or no fit of its kind "
+                    "(Effect.admissible); not scored"
+                )
                 continue
             c = _score_candidate(name, fit[1], fit[0], *fit_against, **judged_by, action=action)
             if saved is None:
@@ -948,7 +951,7 @@ def _candidate(name, model, current, failed, round_, us, ys, records, assess, **
 
 def _fit_candidate(name, model, us, ys, records, action="add"):
     """The fit of `_candidate`: `(fitted model, label)`, or None where the effect has no
-    start on these records."""
+    start on these records or no fit that `Effect.admissible` accepts."""
     effect = EFFECTS[name]
     if action == "replace":
         offset = float(np.mean(np.concatenate([np.asarray(y) for y in ys])))
@@ -981,7 +984,9 @@ def _fit_candidate(name, model, us, ys, records, action="add"):
         if best is None or criterion < best[1]:
             best = (fitted, criterion, start.label)
     if best is None:
-        return None  # no start on these records (a segment where the input never goes)
+        # no start on these records (a segment where the input never goes), or no
+        # admissible fit (curved branches that turn on the records' range)
+        return None
     return best[0], best[2]
 
 
