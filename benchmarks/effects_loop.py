@@ -15,7 +15,6 @@ is removed once the tables are written.
 from __future__ import annotations
 
 import argparse
-import json
 import pathlib
 import time
 
@@ -35,22 +34,14 @@ def main(argv=None) -> int:
 
     jax.config.update("jax_enable_x64", True)
     import pandas as pd
+    from partial_rows import append, open_rows
 
     import jaxcascade as jc
     from jaxcascade._testing import UNDECLARED, undeclared_record
 
     out = pathlib.Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    partial = out.with_suffix(".rows.jsonl")
     settings = {"seed": args.seed, "snr": args.snr, "n": args.n}
-    done = {}
-    if partial.exists() and not args.fresh:
-        lines = [json.loads(line) for line in partial.read_text().splitlines() if line]
-        if lines and lines[0] == settings:
-            done = {row["effect_present"]: row for row in lines[1:]}
-            print(f"resuming: {len(done)} records from {partial}", flush=True)
-    if not done:
-        partial.write_text(json.dumps(settings) + "\n")
+    done, partial = open_rows(out, settings, lambda row: row["effect_present"], args.fresh)
     rows = []
     for name in UNDECLARED:
         if (name or "none") in done:
@@ -75,9 +66,7 @@ def main(argv=None) -> int:
                 "seconds": time.perf_counter() - start,
             }
         )
-        print(rows[-1], flush=True)
-        with partial.open("a") as stream:
-            stream.write(json.dumps(rows[-1]) + "\n")
+        append(partial, rows[-1])
     table = pd.DataFrame(rows)
     table.to_csv(out.with_suffix(".csv"), index=False)
     lines = [

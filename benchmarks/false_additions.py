@@ -20,10 +20,8 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import json
 import math
 import pathlib
-import subprocess
 import time
 
 
@@ -35,15 +33,6 @@ def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
     centre = (p + z * z / (2 * n)) / (1 + z * z / n)
     half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
     return max(0.0, centre - half), min(1.0, centre + half)
-
-
-def _commit() -> str:
-    try:
-        return subprocess.run(
-            ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=True
-        ).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
 
 
 def main(argv=None) -> int:
@@ -60,23 +49,16 @@ def main(argv=None) -> int:
 
     jax.config.update("jax_enable_x64", True)
     import pandas as pd
+    from bench_history import commit  # the short hash, "-dirty" with package changes
+    from partial_rows import append, open_rows
 
     import jaxcascade as jc
     from jaxcascade._benchmark._timing import device_description
     from jaxcascade._testing import UNDECLARED, undeclared_record
 
     out = pathlib.Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    partial = out.with_suffix(".rows.jsonl")
     settings = {"seeds": args.seeds, "n": lengths, "snr": args.snr}
-    done = {}
-    if partial.exists() and not args.fresh:
-        lines = [json.loads(line) for line in partial.read_text().splitlines() if line]
-        if lines and lines[0] == settings:
-            done = {(row["n"], row["seed"]): row for row in lines[1:]}
-            print(f"resuming: {len(done)} records from {partial}", flush=True)
-    if not done:
-        partial.write_text(json.dumps(settings) + "\n")
+    done, partial = open_rows(out, settings, lambda row: (row["n"], row["seed"]), args.fresh)
     model, ar = UNDECLARED[None]()
     rows = []
     started = time.perf_counter()
@@ -102,9 +84,7 @@ def main(argv=None) -> int:
                     "seconds": time.perf_counter() - began,
                 }
             )
-            print(rows[-1], flush=True)
-            with partial.open("a") as stream:
-                stream.write(json.dumps(rows[-1]) + "\n")
+            append(partial, rows[-1])
     table = pd.DataFrame(rows)
     table.to_csv(out.with_suffix(".csv"), index=False)
     command = "python benchmarks/false_additions.py " + " ".join(
@@ -114,7 +94,7 @@ def main(argv=None) -> int:
         f"# False additions of the model-error loop on clean records (Example 1, SNR "
         f"{args.snr:g}, white noise, seeds 0-{args.seeds - 1})",
         "",
-        f"Command: `{command}`; commit {_commit()}, "
+        f"Command: `{command}`; commit {commit()}, "
         f"{datetime.datetime.now(datetime.UTC):%Y-%m-%d %H:%M} UTC, "
         f"{device_description()}, "
         f"{time.perf_counter() - started:.0f} s for the records computed in this run.",

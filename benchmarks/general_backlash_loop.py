@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import json
 import pathlib
 import sys
 import time
@@ -46,6 +45,7 @@ def main(argv=None) -> int:
     import pandas as pd
     from bench_history import commit  # the short hash, "-dirty" with package changes
     from loop_speed import markdown  # a pipe table without an optional dependency
+    from partial_rows import append, open_rows
 
     import jaxcascade as jc
     from jaxcascade._benchmark._timing import device_description
@@ -59,17 +59,8 @@ def main(argv=None) -> int:
         return plain(ex.params()), ex.orders
 
     out = pathlib.Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    partial = out.with_suffix(".rows.jsonl")
     settings = {"seeds": args.seeds, "n": args.n, "records": [list(r) for r in RECORDS]}
-    done = {}
-    if partial.exists() and not args.fresh:
-        lines = [json.loads(line) for line in partial.read_text().splitlines() if line]
-        if lines and lines[0] == settings:
-            done = {(row["record"], row["seed"]): row for row in lines[1:]}
-            print(f"resuming: {len(done)} records from {partial}", flush=True)
-    if not done:
-        partial.write_text(json.dumps(settings) + "\n")
+    done, partial = open_rows(out, settings, lambda row: (row["record"], row["seed"]), args.fresh)
     started = time.perf_counter()
     rows = []
     for name, snr in RECORDS:
@@ -105,9 +96,7 @@ def main(argv=None) -> int:
                     "seconds": time.perf_counter() - began,
                 }
             )
-            print(rows[-1], flush=True)
-            with partial.open("a") as stream:
-                stream.write(json.dumps(rows[-1]) + "\n")
+            append(partial, rows[-1])
     table = pd.DataFrame(rows)
     table.to_csv(out.with_suffix(".csv"), index=False)
     shown = table.copy()
