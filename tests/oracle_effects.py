@@ -39,6 +39,11 @@ The definitions, and where they are documented:
   opposite sign (`DahlFriction.parallel`: "a force opposing the usual sign convention"),
   `sgn(level) dahl(u; |sigma|, |level|)`.
 - `input_backlash`: `y = cascade(play(u))`, play operator of half-width `|gap|`.
+- `general_backlash` (`_effects/_curved.py`, `docs/general_backlash.md`): the cascade's
+  backlash with curved branches on its own `cL`, `mR`, `cR`:
+  `fL = (x + cL) + sum_i curveL[i-2] (x + cL)^i`, `fR = mR (x - cR) + sum_i
+  curveR[i-2] (x - cR)^i`; the output pushed down onto `fL` where it lies below the
+  previous output, else up onto `fR` where it lies above it, else held; from `y = 0`.
 
 `simulate(model, u, effective=...)` takes optional replacements of the values read from
 the model (a test that states a documented-elsewhere deviation explicitly).
@@ -154,6 +159,20 @@ def delay(u, d: int) -> np.ndarray:
     return np.array([u[t - d] if t - d >= 0 else 0.0 for t in range(len(u))])
 
 
+def general_backlash(x, cL: float, mR: float, cR: float, curveL, curveR) -> np.ndarray:
+    """The general backlash's rule, sample by sample (module docstring)."""
+    y, out = 0.0, np.empty(len(x))
+    for t, xt in enumerate(np.asarray(x, float)):
+        fL = (xt + cL) + sum(c * (xt + cL) ** i for i, c in enumerate(curveL, start=2))
+        fR = mR * (xt - cR) + sum(c * (xt - cR) ** i for i, c in enumerate(curveR, start=2))
+        if fL < y:
+            y = fL
+        elif fR > y:
+            y = fR
+        out[t] = y
+    return out
+
+
 # ---- the extended model ---------------------------------------------------------------
 
 
@@ -215,6 +234,7 @@ KNOWN = (
     "backlash_friction_contacts",
     "prandtl_ishlinskii",
     "dahl_friction",
+    "general_backlash",
     *STRUCTURAL,
 )
 
@@ -237,6 +257,10 @@ def simulate(model, u, effective: dict | None = None) -> np.ndarray:
         u_in = _input_effect(name, p, u_in)
     P = oracle.unpack({k: float(v) for k, v in model.params.to_dict().items()}, model.params.orders)
     _, x, y = oracle.simulate(P, u_in)
+    for name, p in effects:
+        if name == "general_backlash":  # in place of the cascade's straight backlash
+            curves = (np.atleast_1d(p["curveL"]), np.atleast_1d(p["curveR"]))
+            y = general_backlash(x, P["cL"], P["mR"], P["cR"], *curves)
     for name, p in effects:
         y = _output_effect(name, p, y, x)
         path = _parallel(name, p, u_model)

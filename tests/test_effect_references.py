@@ -21,6 +21,7 @@ from jaxcascade._effects import (
     EFFECTS,
     BacklashFriction,
     BacklashFrictionContacts,
+    CurvedBacklash,
     DahlFriction,
     ExtendedModel,
     InputBacklash,
@@ -64,6 +65,10 @@ MODELS = {
     ),
     "dahl_friction": lambda: _with(DahlFriction(*_a(4.0, 0.7))),
     "input_backlash": lambda: _with(InputBacklash(*_a(0.25))),
+    # the note's general1: Example 1 with cubic terms on both branches
+    "general_backlash": lambda: _with(
+        CurvedBacklash(jnp.array([0.0, 0.04]), jnp.array([0.0, 0.05]))
+    ),
 }
 
 
