@@ -176,7 +176,7 @@ def lugre_rows(train, data, scored, decimate, run):
     jax.config.update("jax_enable_x64", True)
 
     from jaxcascade._data import read_record
-    from jaxcascade._hysteresis import fit_lugre, simulate_lugre
+    from jaxcascade._measured._effects._operators import fit_lugre, simulate_lugre
     from jaxcascade._metrics import score
 
     options = dict(time_column="time_s", decimate=decimate, scaling="none")

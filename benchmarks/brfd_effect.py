@@ -50,8 +50,8 @@ def main(argv=None) -> int:
     sys.path.insert(0, str(pathlib.Path(__file__).parent))
     from brfd import FILES, WINDOWS, harmonic_files, load
 
-    from jaxcascade._effects import EFFECTS
-    from jaxcascade._hysteresis import backlash_friction, backlash_friction_start
+    from jaxcascade._measured._effects import EFFECTS
+    from jaxcascade._measured._effects._operators import backlash_friction, backlash_friction_start
     from jaxcascade._metrics import score
 
     def refine_slack(effect, records):

@@ -39,10 +39,10 @@ def main(argv=None) -> int:
     sys.path.insert(0, str(pathlib.Path(__file__).parent))
     from brfd import FILES, WINDOWS, harmonic_files, load
 
-    from jaxcascade._effects import EFFECTS, ExtendedModel
-    from jaxcascade._initial_state import scored
-    from jaxcascade._model import CascadeParams, Orders
-    from jaxcascade._noise import ARNoise
+    from jaxcascade._measured._effects import EFFECTS, ExtendedModel
+    from jaxcascade._measured._initial_state import scored
+    from jaxcascade._measured._noise import ARNoise
+    from jaxcascade._system._model import CascadeParams, Orders
 
     data = pathlib.Path(args.data)
     harmonics = [load(p, args.decimate) for p in harmonic_files(data)]

@@ -3,7 +3,7 @@
     python benchmarks/effects_loop.py [--out results/effects_loop] [--seed 1]
 
 Each record is Example 1 with one effect of the library present but not declared
-(`jaxcascade._testing.UNDECLARED`), at SNR 20 (noise floor 1/SNR = 0.05), 2000
+(`jaxcascade._measured._testing.UNDECLARED`), at SNR 20 (noise floor 1/SNR = 0.05), 2000
 estimation and 2000 validation samples with independent inputs and noise; plus a
 record with no extra effect. Writes OUT.csv and OUT.md: the effect present, the
 effects the loop added, NRMSE before and after, the ratio to the noise floor, and the
@@ -37,7 +37,7 @@ def main(argv=None) -> int:
     from partial_rows import append, open_rows
 
     import jaxcascade as jc
-    from jaxcascade._testing import UNDECLARED, undeclared_record
+    from jaxcascade._measured._testing import UNDECLARED, undeclared_record
 
     out = pathlib.Path(args.out)
     settings = {"seed": args.seed, "snr": args.snr, "n": args.n}

@@ -161,7 +161,7 @@ def main(argv=None) -> int:
         f"(`{' '.join(command)}`). Efficiency = crlb_std^2 / std^2, the bound's variance "
         "over the Monte-Carlo variance of the estimates (admissible ones); 1 means the "
         "estimator uses all the information in the record. The bound of a cell is the "
-        "root mean square of its records' own bounds (jaxcascade._efficiency)."
+        "root mean square of its records' own bounds (jaxcascade._estimator._efficiency)."
     )
     stem.with_name(stem.name + ".md").write_text(markdown(table, header))
     figure(table, stem.with_name(stem.name + ".png"))

@@ -3,7 +3,8 @@
     python benchmarks/false_additions.py [--seeds 50] [--n 1024,2000]
         [--out results/false_additions]
 
-Each record is Example 1 with no undeclared effect (`jaxcascade._testing.UNDECLARED[None]`,
+Each record is Example 1 with no undeclared effect
+(`jaxcascade._measured._testing.UNDECLARED[None]`,
 white noise at SNR 20), estimation and validation records of N samples each with
 independent inputs and noise, drawn from seeds 0 to S-1 (`PRNGKey(seed)` split in two,
 as `benchmarks/effects_loop.py` draws its records). The loop runs with its defaults
@@ -54,7 +55,7 @@ def main(argv=None) -> int:
 
     import jaxcascade as jc
     from jaxcascade._benchmark._timing import device_description
-    from jaxcascade._testing import UNDECLARED, undeclared_record
+    from jaxcascade._measured._testing import UNDECLARED, undeclared_record
 
     out = pathlib.Path(args.out)
     settings = {"seeds": args.seeds, "n": lengths, "snr": args.snr}

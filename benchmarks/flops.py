@@ -12,7 +12,7 @@ import argparse
 import jax
 
 from jaxcascade._benchmark._flops import floor_time, flops_per_fit, machine_rate, matmul_rates
-from jaxcascade._examples import example
+from jaxcascade._system._examples import example
 
 
 def main(argv=None) -> None:

@@ -4,7 +4,7 @@ against the noise, and degree 1 against today's backlash.
 
     python benchmarks/general_backlash.py [--seed 0] [--out results/general_backlash]
 
-For `general1` and `general2` (`jaxcascade._general_backlash.GENERAL_EXAMPLES`), one
+For `general1` and `general2` (`jaxcascade._system._general_backlash.GENERAL_EXAMPLES`), one
 record of the example's N samples, input uniform in (-amplitude, amplitude) from
 `PRNGKey(seed)`, noise-free: the range of the LD output x, each branch's smallest slope
 there and the smallest dead band fL - fR (`branch_report`: negative where the branches
@@ -60,15 +60,15 @@ def main(argv=None) -> int:
     from jaxcascade._estimator._general_keyterm import key_term_general
     from jaxcascade._estimator._general_refine import refine_general
     from jaxcascade._estimator._robust import Robust
-    from jaxcascade._general_backlash import (
+    from jaxcascade._status import Status
+    from jaxcascade._system._general_backlash import (
         GENERAL_EXAMPLES,
         GeneralBacklash,
         branch_report,
         general_signals,
         simulate_general,
     )
-    from jaxcascade._simulate import backlash
-    from jaxcascade._status import Status
+    from jaxcascade._system._simulate import backlash
 
     rows = []
     for name, example in GENERAL_EXAMPLES.items():

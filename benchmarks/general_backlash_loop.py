@@ -3,7 +3,7 @@ branches are curved and on the 2016 examples' records, whose branches are straig
 
     python benchmarks/general_backlash_loop.py --seeds 10 --out results/general_backlash/loop
 
-Records (`jaxcascade._testing`): `general1` and `general2` (the note's examples, the
+Records (`jaxcascade._measured._testing`): `general1` and `general2` (the note's examples, the
 curvature as the loop's `general_backlash` effect, declared with straight branches and
 their own orders) at an SNR where the curvature moves the output by more than twice the
 noise (general1: 50, general2: 25; the table gives the ratio), and Examples 1 and 2 of
@@ -49,8 +49,8 @@ def main(argv=None) -> int:
 
     import jaxcascade as jc
     from jaxcascade._benchmark._timing import device_description
-    from jaxcascade._effects import backlash_of, plain, simulate_extended
-    from jaxcascade._testing import CURVED, undeclared_record
+    from jaxcascade._measured._effects import backlash_of, plain, simulate_extended
+    from jaxcascade._measured._testing import CURVED, undeclared_record
 
     def record_model(name):
         if name in CURVED:

@@ -5,7 +5,7 @@ straight-backlash model when the truth is curved.
     python benchmarks/general_backlash_study.py [--records 50] [--snr 25] [--seed 0]
         [--out results/general_backlash/study]
 
-For each example of `jaxcascade._general_backlash.GENERAL_EXAMPLES` (N samples of the
+For each example of `jaxcascade._system._general_backlash.GENERAL_EXAMPLES` (N samples of the
 example, input uniform in (-amplitude, amplitude) from `PRNGKey(seed)`, the same input
 for every realisation), R realisations of white output noise at the SNR (the paper's
 amplitude SNR, `add_noise` with `PRNGKey(seed + 1 + r)`), three fits per realisation:
@@ -55,13 +55,13 @@ def main(argv=None) -> int:
     from jaxcascade._estimator._general_keyterm import key_term_general
     from jaxcascade._estimator._general_refine import refine_general
     from jaxcascade._estimator._robust import Robust
-    from jaxcascade._general_backlash import (
+    from jaxcascade._status import Status
+    from jaxcascade._system._general_backlash import (
         GENERAL_EXAMPLES,
         GeneralBacklash,
         simulate_general,
     )
-    from jaxcascade._simulate import add_noise
-    from jaxcascade._status import Status
+    from jaxcascade._system._simulate import add_noise
 
     started = time.perf_counter()
     rows, status_rows = [], []

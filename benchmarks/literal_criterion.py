@@ -37,8 +37,8 @@ def issue_records(example: int, snr: float):
     import jax
 
     from jaxcascade._cli._reproduce import run_example
-    from jaxcascade._examples import example as paper_example
     from jaxcascade._status import Status
+    from jaxcascade._system._examples import example as paper_example
 
     ex = paper_example(example)
     rows = []
@@ -61,9 +61,9 @@ def issue_records(example: int, snr: float):
 
 def sweep_records(example: int, snr: float, seed: int, folder: pathlib.Path, command):
     """The literal estimator on one 40-realisation sweep of the engine: one row each."""
-    from jaxcascade._examples import example as paper_example
     from jaxcascade._montecarlo._run import run
     from jaxcascade._montecarlo._spec import Spec
+    from jaxcascade._system._examples import example as paper_example
 
     spec = Spec(
         example=example,

@@ -8,7 +8,7 @@ persistent cache folder (`JAXCASCADE_CACHE`, `XDG_CACHE_HOME`), then **warm** wi
 cache the cold run filled (what a user sees the second time). The cases:
 
 - `loop input_delay`: `jaxcascade loop est.csv --validate val.csv` with the default
-  settings on the synthetic input-delay records (`jaxcascade._testing.UNDECLARED`,
+  settings on the synthetic input-delay records (`jaxcascade._measured._testing.UNDECLARED`,
   Example 1 with a 2-sample input delay, SNR 20, `--n` samples each, seed 0): every
   candidate of the library is fitted.
 - `fit`: `jaxcascade fit clean.csv` (robust estimator) on the record of the same input
@@ -55,7 +55,7 @@ COUNTS = {
     "/jax/compilation_cache/cache_hits": "cache_hits",
 }
 STAGES = {
-    # function of jaxcascade._loop -> the stage its calls belong to
+    # function of jaxcascade._measured._loop -> the stage its calls belong to
     "evaluate": "evaluate",
     "_fit_candidate": "candidate fit",
     "_fit_noise": "candidate fit",
@@ -70,9 +70,9 @@ def child(argv: list[str]) -> dict:
     """Run `jaxcascade ARGV` in this process and return what the events say."""
     import jax
 
-    from jaxcascade import _loop
     from jaxcascade._cli import main
     from jaxcascade._estimator import _robust
+    from jaxcascade._measured import _loop
 
     totals: dict[str, float] = {}
     stages: dict[str, dict[str, float]] = {}
@@ -151,7 +151,7 @@ def records(folder: pathlib.Path, n: int) -> tuple[str, str, str]:
     import numpy as np
 
     jax.config.update("jax_enable_x64", True)
-    from jaxcascade._testing import UNDECLARED, undeclared_record
+    from jaxcascade._measured._testing import UNDECLARED, undeclared_record
 
     k_est, k_val = jax.random.split(jax.random.PRNGKey(0))
     paths = []

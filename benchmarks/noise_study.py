@@ -85,7 +85,7 @@ def study(number: int, label: str, realisations: int, seed: int, out: pathlib.Pa
     import pandas as pd
 
     from jaxcascade import run, summarise
-    from jaxcascade._efficiency import information_factor
+    from jaxcascade._estimator._efficiency import information_factor
     from jaxcascade._montecarlo._tables import crlb_column
 
     spec = spec_for(number, label, realisations, seed)

@@ -16,7 +16,7 @@ import numpy as np
 
 from jaxcascade._benchmark import _baseline
 from jaxcascade._benchmark._timing import _example_vector, run_baseline
-from jaxcascade._examples import example
+from jaxcascade._system._examples import example
 
 
 def _per_call(function, repeats=20) -> float:

@@ -91,10 +91,10 @@ def main(argv=None) -> int:
         stopping_rule,
         voros,
     )
-    from jaxcascade._examples import example
-    from jaxcascade._model import CascadeParams
-    from jaxcascade._normal_equations import normal_equations, resolve, solve_step
-    from jaxcascade._simulate import measure, uniform_input
+    from jaxcascade._estimator._normal_equations import normal_equations, resolve, solve_step
+    from jaxcascade._system._examples import example
+    from jaxcascade._system._model import CascadeParams
+    from jaxcascade._system._simulate import measure, uniform_input
 
     ex = example(1)
     orders, n, iterations, batch = ex.orders, 4000, 20, args.batch

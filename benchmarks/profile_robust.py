@@ -38,10 +38,10 @@ def main(argv=None) -> int:
     from jaxcascade._estimator import _robust as R
     from jaxcascade._estimator._literal import voros
     from jaxcascade._estimator._refine import normal_equations, to_unconstrained
-    from jaxcascade._examples import example
-    from jaxcascade._model import Orders
-    from jaxcascade._prior import random_system
-    from jaxcascade._simulate import measure, uniform_input
+    from jaxcascade._system._examples import example
+    from jaxcascade._system._model import Orders
+    from jaxcascade._system._prior import random_system
+    from jaxcascade._system._simulate import measure, uniform_input
 
     orders = Orders()
     n, snr = system_defaults(args.system)

@@ -64,7 +64,7 @@ def segment_steps(U, Y, starts, orders, length):
     import jax.numpy as jnp
 
     from jaxcascade._estimator._literal import voros_step
-    from jaxcascade._model import CascadeParams
+    from jaxcascade._system._model import CascadeParams
 
     def step(vector, u, y):
         params = CascadeParams.from_vector(vector, orders, check=False)
@@ -107,9 +107,9 @@ def main(argv=None) -> int:
     import pandas as pd
 
     from jaxcascade._estimator._recursive import recursive
-    from jaxcascade._examples import example
-    from jaxcascade._model import CascadeParams
-    from jaxcascade._simulate import measure, uniform_input
+    from jaxcascade._system._examples import example
+    from jaxcascade._system._model import CascadeParams
+    from jaxcascade._system._simulate import measure, uniform_input
 
     R = args.realisations
     rows = []

@@ -59,9 +59,9 @@ def main(argv=None) -> int:
     jax.config.update("jax_enable_x64", True)
     import pandas as pd
 
-    from jaxcascade._changing import Change
-    from jaxcascade._examples import example
+    from jaxcascade._experiment._changing import Change
     from jaxcascade._montecarlo._tracking import tracking
+    from jaxcascade._system._examples import example
 
     truth = example(1).params()
     rows, curves = [], {}

@@ -48,8 +48,8 @@ VARIANTS = {
 def records(number, realisations, snr, n, seed):
     import jax
 
-    from jaxcascade._examples import example
-    from jaxcascade._simulate import measure, uniform_input
+    from jaxcascade._system._examples import example
+    from jaxcascade._system._simulate import measure, uniform_input
 
     ex = example(number)
 
@@ -76,8 +76,8 @@ def main(argv=None) -> int:
     import pandas as pd
 
     from jaxcascade._estimator import estimator
-    from jaxcascade._examples import example
     from jaxcascade._status import Status
+    from jaxcascade._system._examples import example
 
     ex = example(1)
     truth = np.asarray(ex.params().to_vector())

@@ -72,10 +72,10 @@ def records(family, realisations, snr, seed, pole=None):
     import jax
     import jax.numpy as jnp
 
-    from jaxcascade._disturbance import disturbance
-    from jaxcascade._examples import example
-    from jaxcascade._prior import random_system
-    from jaxcascade._simulate import add_noise, simulate, uniform_input
+    from jaxcascade._experiment._disturbance import disturbance
+    from jaxcascade._system._examples import example
+    from jaxcascade._system._prior import random_system
+    from jaxcascade._system._simulate import add_noise, simulate, uniform_input
 
     noise = None if pole is None else disturbance("ar", poles=(pole,))
 

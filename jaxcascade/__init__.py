@@ -69,18 +69,18 @@ from ._version import __version__ as __version__
 
 # module: the public names it provides
 _MODULES = {
-    "._arx": (
+    "._measured._arx": (
         "ARX",
         "best_arx",
         "fit_arx",
     ),
-    "._benchmark_data": (
+    "._measured._benchmark_data": (
         "BENCHMARKS",
         "Benchmark",
         "BenchmarkRecord",
         "benchmark_data",
     ),
-    "._changing": (
+    "._experiment._changing": (
         "Change",
         "simulate_changing",
         "trajectory",
@@ -92,19 +92,19 @@ _MODULES = {
         "record_from_arrays",
         "split_record",
     ),
-    "._diagnose": (
+    "._measured._diagnose": (
         "ResidualTests",
         "regime_from_switches",
         "residual_tests",
     ),
-    "._efficiency": (
+    "._estimator._efficiency": (
         "crlb",
         "fisher_information",
         "information_factor",
         "jacobian",
         "standard_errors",
     ),
-    "._effects": (
+    "._measured._effects": (
         "EFFECTS",
         "Effect",
         "ExtendedModel",
@@ -137,16 +137,16 @@ _MODULES = {
         "Robust",
         "robust",
     ),
-    "._examples": (
+    "._system._examples": (
         "EXAMPLES",
         "Example",
         "example",
     ),
-    "._loop": (
+    "._measured._loop": (
         "LoopResult",
         "model_error_loop",
     ),
-    "._model_file": (
+    "._measured._model_file": (
         "SavedModel",
         "load_model",
     ),
@@ -154,7 +154,7 @@ _MODULES = {
         "fit_percent",
         "nrmse",
     ),
-    "._model": (
+    "._system._model": (
         "CascadeParams",
         "Orders",
         "is_admissible",
@@ -183,13 +183,13 @@ _MODULES = {
         "Tracking",
         "tracking",
     ),
-    "._noise": ("ARNoise",),
-    "._disturbance": (
+    "._measured._noise": ("ARNoise",),
+    "._experiment._disturbance": (
         "Disturbance",
         "NOISES",
         "disturbance",
     ),
-    "._inputs": (
+    "._experiment._inputs": (
         "INPUTS",
         "InputDesign",
         "input_design",
@@ -201,9 +201,9 @@ _MODULES = {
     ),
     "._plot._sweep": ("plot_sweep",),
     "._plot._tracking": ("plot_tracking",),
-    "._prior": ("random_system",),
-    "._regression": ("regression",),
-    "._simulate": (
+    "._system._prior": ("random_system",),
+    "._estimator._regression": ("regression",),
+    "._system._simulate": (
         "add_noise",
         "backlash",
         "linear_block",

@@ -27,7 +27,7 @@ import pandas as pd
 import scipy.signal
 
 from . import _defaults
-from ._validate import MAX_MAGNITUDE
+from ._system._validate import MAX_MAGNITUDE
 
 _FORMATS = {
     ".csv": "csv",

@@ -8,7 +8,7 @@ documented class constants such as `start_fractions`), never the package's code.
 
 The definitions, and where they are documented:
 
-- the extended model (`jaxcascade/_effects/_base.py`, module docstring and
+- the extended model (`jaxcascade/_measured/_effects/_base.py`, module docstring and
   `ExtendedModel`): `y = output_effects(cascade(input_effects(u)), x)`, the effects in
   the order of `model.effects`; a parallel path (the hysteresis effects but
   `input_backlash`, `_effects/_hysteresis.py`) is a function of the model's input `u`,
@@ -19,7 +19,7 @@ The definitions, and where they are documented:
   `output_feedthrough`: `y + d x`, `x` the linear block's output; `input_delay`:
   `u(t - d)`, zero before the record; `dynamics_order`, `pwl_segment`: no parameters
   of their own (they change the cascade's orders: `oracle.simulate`).
-- the operators (`jaxcascade/_hysteresis.py`, module docstring): the stop operator
+- the operators (`jaxcascade/_measured/_effects/_operators.py`, module docstring): the stop operator
   `s(t) = clip(s(t-1) + u(t) - u(t-1), -r, r)` from `s = 0` with `u(-1) = u(0)`; the
   play operator `p(t) = u(t) - s(t)`; Dahl friction
   `F(t) = F(t-1) + sigma du (1 - F(t-1)/Fc sgn(du))` clipped to `|F| <= Fc`, from

@@ -11,7 +11,7 @@ zero before the record. So `y(t) = -sum_i a_i y(t-i) + sum_j b_j u(t-j) + c + e(
 import numpy as np
 import pytest
 
-from jaxcascade._arx import ARX, best_arx, fit_arx
+from jaxcascade._measured._arx import ARX, best_arx, fit_arx
 
 EPS = np.finfo(float).eps
 N = 500

@@ -25,12 +25,13 @@ import pyarrow.parquet as pq
 import pytest
 
 import jaxcascade as jc
-from jaxcascade import Orders, Status, _fused
+from jaxcascade import Orders, Status
 from jaxcascade._cli import main
 from jaxcascade._cli._common import strict_json
 from jaxcascade._cli._fit import FAILED
+from jaxcascade._estimator import _fused
+from jaxcascade._estimator._normal_equations import normal_equations
 from jaxcascade._estimator._robust import _robust, judge
-from jaxcascade._normal_equations import normal_equations
 
 ORDERS = Orders(2, 2, 2, 2)
 N = 300

@@ -5,7 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxcascade._batching import chunked_vmap, host_threads, split_batch
+from jaxcascade._benchmark._batching import chunked_vmap, host_threads, split_batch
 
 
 @pytest.mark.parametrize(
@@ -42,7 +42,7 @@ def test_literal_workload_over_host_threads_equals_one_call(records, exact):
     # 8 records in micro-batches of 4: the parts' micro-batches are the whole's (2 x 4
     # against 1 x 4 each), bit for bit; 10 records: 3 x 4 against 2 x 3, to rounding.
     from jaxcascade._benchmark._timing import batched_fit
-    from jaxcascade._examples import example
+    from jaxcascade._system._examples import example
 
     params = example(1).params(jnp.float64)
     keys = jax.random.split(jax.random.PRNGKey(3), records)

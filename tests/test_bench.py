@@ -12,11 +12,11 @@ import sys
 
 import pytest
 
-from jaxcascade import _fused
 from jaxcascade._benchmark import _flops
 from jaxcascade._benchmark._timing import SUMMARY_KEYS
 from jaxcascade._cli import main
-from jaxcascade._model import Orders
+from jaxcascade._estimator import _fused
+from jaxcascade._system._model import Orders
 
 TINY = ["--realisations", "8", "--n", "300", "--iterations", "3"]
 FAST = ["--baseline-realisations", "3", "--matmul-size", "128", "--repeats", "1"]

@@ -50,7 +50,7 @@ def test_split_drops_whole_early_records_past_the_budget():
 
 def test_scored_records_need_only_their_initialisation_and_a_few_samples():
     from jaxcascade import Orders
-    from jaxcascade._loop import MIN_SCORED, check_lengths, check_scored_length
+    from jaxcascade._measured._loop import MIN_SCORED, check_lengths, check_scored_length
 
     check_scored_length(100, 10, "validation")  # CED's 100-sample records
     with pytest.raises(ValueError, match="fewer than the 30 a scored record needs"):
@@ -121,7 +121,7 @@ def test_loop_on_ced_scores_every_test_set_in_its_unit(capsys, tmp_path):
 
 
 def test_an_integrating_output_is_scored_through_its_difference():
-    from jaxcascade._integrating import integrated, integrates
+    from jaxcascade._measured._integrating import integrated, integrates
 
     rng = np.random.default_rng(0)
     u = rng.normal(size=400)

@@ -228,7 +228,7 @@ def test_loop_on_several_records_with_a_window(capsys, tmp_path):
 
 
 def test_verdict_says_when_the_final_model_is_worse_than_a_trivial_one():
-    from jaxcascade._scoring import RecordScore, verdict
+    from jaxcascade._measured._scoring import RecordScore, verdict
 
     def row(model, record, window_error):
         return RecordScore(model, record, "validation", 0.5, window_error, 0.6, 0.7, 50)

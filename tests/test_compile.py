@@ -73,8 +73,8 @@ import jax, jax.numpy as jnp, numpy as np
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_compilation_cache_dir", sys.argv[1])
 from jaxcascade import _compile
-from jaxcascade._initial_state import _initialise
-from jaxcascade._testing import UNDECLARED, undeclared_record
+from jaxcascade._measured._initial_state import _initialise
+from jaxcascade._measured._testing import UNDECLARED, undeclared_record
 
 model, _ = UNDECLARED["input_delay"]()
 u, y = undeclared_record(model, jax.random.PRNGKey(3), 256, 20.0)

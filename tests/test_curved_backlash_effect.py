@@ -11,12 +11,12 @@ import pytest
 from test_general_backlash import _numpy_general_backlash
 
 import jaxcascade as jc
-from jaxcascade._effects import EFFECTS, CurvedBacklash, ExtendedModel, backlash_of, plain
-from jaxcascade._effects import simulate_with_switches as simulate
-from jaxcascade._general_backlash import general_example
-from jaxcascade._initial_state import rest_state, simulate_from
-from jaxcascade._loop_checkpoint import model_from_dict, model_to_dict
-from jaxcascade._noise import ARNoise
+from jaxcascade._measured._effects import EFFECTS, CurvedBacklash, ExtendedModel, backlash_of, plain
+from jaxcascade._measured._effects import simulate_with_switches as simulate
+from jaxcascade._measured._initial_state import rest_state, simulate_from
+from jaxcascade._measured._loop_checkpoint import model_from_dict, model_to_dict
+from jaxcascade._measured._noise import ARNoise
+from jaxcascade._system._general_backlash import general_example
 
 
 def _curved(name="general1"):
@@ -104,7 +104,7 @@ def test_the_effect_is_in_the_library_and_survives_checkpoint_and_model_file(tmp
         jax.tree_util.tree_leaves(model), jax.tree_util.tree_leaves(again), strict=True
     ):
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
-    from jaxcascade._model_file import SavedModel, load_model
+    from jaxcascade._measured._model_file import SavedModel, load_model
 
     path = tmp_path / "model.json"
     SavedModel(model).save(path)
@@ -120,7 +120,7 @@ def test_the_loop_adds_curved_branches_where_the_record_has_them():
     # the library: the straight cascade's residual fails a test of the signature, the
     # curved model is significant and ends at the noise floor. (The full library on
     # both examples and on straight records: benchmarks/general_backlash_loop.py.)
-    from jaxcascade._testing import CURVED, undeclared_record
+    from jaxcascade._measured._testing import CURVED, undeclared_record
 
     model, orders = CURVED["general2"]()
     k_est, k_val = jax.random.split(jax.random.PRNGKey(1))

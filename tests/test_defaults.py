@@ -72,7 +72,7 @@ def test_a_float64_record_with_float64_off_is_one_warning_naming_the_switch():
     """Run in a fresh interpreter: the tests' own process has float64 on."""
     code = (
         "import warnings, numpy as np, jaxcascade as jc\n"
-        "from jaxcascade._validate import record\n"
+        "from jaxcascade._system._validate import record\n"
         "with warnings.catch_warnings(record=True) as caught:\n"
         "    warnings.simplefilter('always')\n"
         "    u, y = record(np.linspace(0, 1, 50), np.linspace(0, 2, 50), where='fit')\n"

@@ -8,7 +8,7 @@ import pytest
 import scipy.signal
 import scipy.stats
 
-from jaxcascade._diagnose import (
+from jaxcascade._measured._diagnose import (
     correlation,
     regime_from_switches,
     residual_tests,
@@ -199,7 +199,7 @@ def _hysteresis_input(n=3000, seed=0):
 
 
 def test_hysteresis_test_is_significant_on_a_hysteretic_residual():
-    from jaxcascade._diagnose import hysteresis_test, stop_outputs
+    from jaxcascade._measured._diagnose import hysteresis_test, stop_outputs
 
     u = _hysteresis_input()
     e = stop_outputs(u, [0.3])[:, 0] + 0.1 * np.random.default_rng(1).normal(size=u.size)
@@ -209,7 +209,7 @@ def test_hysteresis_test_is_significant_on_a_hysteretic_residual():
 
 
 def test_hysteresis_test_passes_on_a_static_error_and_on_noise():
-    from jaxcascade._diagnose import hysteresis_test
+    from jaxcascade._measured._diagnose import hysteresis_test
 
     u = _hysteresis_input(seed=2)
     noise = 0.1 * np.random.default_rng(3).normal(size=u.size)
@@ -221,9 +221,9 @@ def test_hysteresis_test_passes_on_a_static_error_and_on_noise():
 def test_hysteresis_test_passes_on_a_cascade_record():
     import jax
 
-    from jaxcascade._diagnose import residual_tests
-    from jaxcascade._effects import simulate_extended
-    from jaxcascade._testing import UNDECLARED, undeclared_record
+    from jaxcascade._measured._diagnose import residual_tests
+    from jaxcascade._measured._effects import simulate_extended
+    from jaxcascade._measured._testing import UNDECLARED, undeclared_record
 
     model, _ = UNDECLARED[None]()
     u, y = undeclared_record(model, jax.random.PRNGKey(4), 2000, 20.0)
@@ -237,7 +237,7 @@ def test_branch_test_sees_a_mean_that_changes_along_a_branch():
     # white noise plus, on the right branch only, a residual that is a parabola in the
     # model's output level (a curved branch seen through a straight line, zero mean over
     # the branch): the branch test fails, the regime test (one mean per regime) cannot
-    from jaxcascade._diagnose import branch_test
+    from jaxcascade._measured._diagnose import branch_test
 
     rng = np.random.default_rng(7)
     level = rng.uniform(-1.0, 1.0, N)

@@ -6,9 +6,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxcascade._disturbance import NOISES, disturbance
-from jaxcascade._disturbance._arma import autocovariance
-from jaxcascade._simulate import add_noise
+from jaxcascade._experiment._disturbance import NOISES, disturbance
+from jaxcascade._experiment._disturbance._arma import autocovariance
+from jaxcascade._system._simulate import add_noise
 
 N, RECORDS = 400, 2000
 

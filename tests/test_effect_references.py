@@ -17,7 +17,7 @@ import oracle
 import oracle_effects
 import pytest
 
-from jaxcascade._effects import (
+from jaxcascade._measured._effects import (
     EFFECTS,
     BacklashFriction,
     BacklashFrictionContacts,
@@ -33,9 +33,9 @@ from jaxcascade._effects import (
     plain,
     simulate_extended,
 )
-from jaxcascade._examples import example
-from jaxcascade._noise import ARNoise
-from jaxcascade._testing import UNDECLARED
+from jaxcascade._measured._noise import ARNoise
+from jaxcascade._measured._testing import UNDECLARED
+from jaxcascade._system._examples import example
 
 N = 400
 TOLERANCE = 10 * N * np.finfo(float).eps  # relative to the output's scale (docstring)

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 
 import jaxcascade as jc
 from jaxcascade._data import Scaling
-from jaxcascade._effects import EFFECTS, plain
+from jaxcascade._measured._effects import EFFECTS, plain
 
 ORDERS = jc.Orders(2, 2, 2, 2)
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import jaxcascade as jc
-from jaxcascade._efficiency import (
+from jaxcascade._estimator._efficiency import (
     crlb,
     fisher_information,
     jacobian,

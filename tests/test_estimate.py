@@ -147,7 +147,7 @@ def test_a_period_10_cycle_is_a_cycle_not_max_iterations():
     # With the old window of 8 periods it was reported as max_iterations after 50 steps.
     from jaxcascade._montecarlo._engine import cell_key
     from jaxcascade._montecarlo._spec import Spec
-    from jaxcascade._simulate import add_noise, simulate, uniform_input
+    from jaxcascade._system._simulate import add_noise, simulate, uniform_input
 
     spec = Spec(example=1, n=4000, snr=(25.0,), realisations=40, seed=2, estimators=("literal",))
     key = jax.random.fold_in(cell_key(spec, spec.cells()[0]), 9)

@@ -12,12 +12,12 @@ import pandas as pd
 import pytest
 
 from jaxcascade._cli import main
-from jaxcascade._model import Orders
 from jaxcascade._montecarlo._engine import _system_tag, cell_key, run_chunk
 from jaxcascade._montecarlo._run import run
 from jaxcascade._montecarlo._spec import Spec
 from jaxcascade._montecarlo._tables import TIMING_COLUMNS, summarise, true_column, without_timing
-from jaxcascade._prior import random_system
+from jaxcascade._system._model import Orders
+from jaxcascade._system._prior import random_system
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 N = 300

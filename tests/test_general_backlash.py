@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import jaxcascade as jc
-from jaxcascade._general_backlash import (
+from jaxcascade._system._general_backlash import (
     GENERAL_EXAMPLES,
     GeneralBacklash,
     branch_report,
@@ -19,7 +19,7 @@ from jaxcascade._general_backlash import (
     general_signals,
     simulate_general,
 )
-from jaxcascade._simulate import backlash, signals
+from jaxcascade._system._simulate import backlash, signals
 
 
 def _numpy_general_backlash(x, cL, mR, cR, curveL, curveR):
@@ -221,7 +221,7 @@ def test_the_truth_is_a_fixed_point_of_the_key_term_regression(name):
     # the note's check: with the true internal signals the regression has full column
     # rank and returns the truth (noise-free)
     from jaxcascade._estimator._general_keyterm import general_regression
-    from jaxcascade._regression import solve_normal_equations
+    from jaxcascade._estimator._regression import solve_normal_equations
 
     example = general_example(name)
     params, nd = example.params(), example.backlash()
@@ -236,7 +236,7 @@ def test_the_truth_is_a_fixed_point_of_the_key_term_regression(name):
 
 def test_degree_one_regression_is_the_cascades():
     from jaxcascade._estimator._general_keyterm import general_regression
-    from jaxcascade._regression import regression
+    from jaxcascade._estimator._regression import regression
 
     params = jc.example(2).params()
     u = _input(1000)

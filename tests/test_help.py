@@ -90,8 +90,8 @@ def test_every_option_has_help_text():
 
 
 def test_effects_help_lists_every_effect_and_the_noise_model(probe):
-    from jaxcascade._effects import EFFECTS
-    from jaxcascade._noise import ARNoise
+    from jaxcascade._measured._effects import EFFECTS
+    from jaxcascade._measured._noise import ARNoise
 
     text = " ".join(probe["texts"]["loop --help"].split())  # argparse wraps lines
     for name in [*EFFECTS, ARNoise.name]:

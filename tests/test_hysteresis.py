@@ -9,8 +9,8 @@ import pytest
 import scipy.signal
 
 import jaxcascade as jc
-from jaxcascade._effects import EFFECTS, ExtendedModel, plain, simulate_extended
-from jaxcascade._noise import ARNoise
+from jaxcascade._measured._effects import EFFECTS, ExtendedModel, plain, simulate_extended
+from jaxcascade._measured._noise import ARNoise
 
 TRUTH = jc.example(1).params
 
@@ -24,7 +24,7 @@ def _triangle(amplitude=1.0, period=200, cycles=3):
 
 
 def test_stop_operator_on_a_triangle_wave():
-    from jaxcascade._hysteresis import play_operator, stop_operator
+    from jaxcascade._measured._effects._operators import play_operator, stop_operator
 
     u = _triangle()
     r = 0.3
@@ -49,8 +49,8 @@ def test_stop_operator_on_a_triangle_wave():
 
 
 def test_stop_operator_matches_the_numpy_oracle():
-    from jaxcascade._diagnose import stop_outputs
-    from jaxcascade._hysteresis import stop_operators
+    from jaxcascade._measured._diagnose import stop_outputs
+    from jaxcascade._measured._effects._operators import stop_operators
 
     u = np.cumsum(np.random.default_rng(0).normal(size=500)) * 0.1
     thresholds = np.array([0.05, 0.2, 1.0])
@@ -60,7 +60,7 @@ def test_stop_operator_matches_the_numpy_oracle():
 
 
 def test_prandtl_ishlinskii_is_linear_in_its_weights():
-    from jaxcascade._effects import PrandtlIshlinskii
+    from jaxcascade._measured._effects import PrandtlIshlinskii
 
     u = jnp.asarray(_triangle())
     thresholds, knots = jnp.array([0.1, 0.4]), jnp.array([0.5])
@@ -76,12 +76,12 @@ def test_prandtl_ishlinskii_is_linear_in_its_weights():
 
 
 def test_slack_friction_plateaus_and_dead_zone():
-    from jaxcascade._effects import SlackFriction
+    from jaxcascade._measured._effects import SlackFriction
 
     u = jnp.asarray(_triangle())
     effect = SlackFriction(*(jnp.asarray(v) for v in (0.3, 0.5, 2.0, -1.5)))
     force = np.asarray(effect.parallel(u))
-    from jaxcascade._hysteresis import stop_operator
+    from jaxcascade._measured._effects._operators import stop_operator
 
     s = np.asarray(stop_operator(u, 0.3))
     np.testing.assert_allclose(force[np.abs(s) <= 0.15], 0.0)  # the slack (dead zone)
@@ -94,7 +94,7 @@ def test_backlash_friction_slack_stiffness_and_levels():
     # A triangle of amplitude 1 through a slack of half-width 0.1, stiffness 20, levels
     # 2 (forward) and 1.5 (back): after each reversal the force falls to 0 with slope k,
     # stays 0 for 2 gap of travel, then rises with slope k to the other level.
-    from jaxcascade._hysteresis import backlash_friction
+    from jaxcascade._measured._effects._operators import backlash_friction
 
     u = _triangle(period=2000)
     gap, k, upper, lower = 0.1, 20.0, 2.0, 1.5
@@ -114,7 +114,7 @@ def test_backlash_friction_slack_stiffness_and_levels():
 
 
 def test_backlash_friction_starts_are_forgotten_after_sliding_both_ways():
-    from jaxcascade._hysteresis import backlash_friction, backlash_friction_start
+    from jaxcascade._measured._effects._operators import backlash_friction, backlash_friction_start
 
     u = jnp.asarray(_triangle(period=400))
     one = np.asarray(backlash_friction(u, 0.1, 20.0, 2.0, 1.5, (0.0,)))
@@ -131,7 +131,7 @@ def test_backlash_friction_starts_are_forgotten_after_sliding_both_ways():
 
 
 def test_backlash_friction_is_traceable_and_differentiable():
-    from jaxcascade._hysteresis import backlash_friction
+    from jaxcascade._measured._effects._operators import backlash_friction
 
     u = jnp.asarray(_triangle(period=400))
 
@@ -147,7 +147,7 @@ def test_backlash_friction_effect_recovers_its_parameters(name):
     # Two synthetic records of different amplitudes (a rotor that slides in both), noise
     # 0.05: the output-error fit from the default grid of starts recovers the slack, the
     # stiffness, both levels and the offset.
-    from jaxcascade._effects import HYSTERESIS
+    from jaxcascade._measured._effects import HYSTERESIS
 
     effect_class = EFFECTS[name]
     assert effect_class.needs_signature and name in HYSTERESIS
@@ -168,7 +168,7 @@ def test_backlash_friction_effect_recovers_its_parameters(name):
 
 
 def test_dahl_reaches_its_level():
-    from jaxcascade._hysteresis import dahl
+    from jaxcascade._measured._effects._operators import dahl
 
     u = jnp.linspace(0.0, 1.0, 400)
     force = np.asarray(dahl(u, 50.0, 2.0))
@@ -179,8 +179,8 @@ def test_dahl_reaches_its_level():
 def test_hysteresis_effect_is_refitted_on_several_records():
     # A cascade plus a friction path: the loop machinery refits the path's parameters
     # jointly on two records, each from its own initial state.
-    from jaxcascade._effects import SlackFriction
-    from jaxcascade._loop import refit
+    from jaxcascade._measured._effects import SlackFriction
+    from jaxcascade._measured._loop import refit
 
     truth = SlackFriction(*(jnp.asarray(v) for v in (0.4, 0.4, 1.0, -0.8)))
     model = ExtendedModel(TRUTH(), (truth,), ARNoise.white())
@@ -199,7 +199,7 @@ def test_hysteresis_effect_is_refitted_on_several_records():
 
 
 def test_ridge_with_vanishing_features_is_minimum_norm():
-    from jaxcascade._hysteresis import ridge
+    from jaxcascade._measured._effects._operators import ridge
 
     X = np.zeros((50, 3))
     X[:, 0] = np.linspace(-1, 1, 50)

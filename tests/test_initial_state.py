@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from jaxcascade._compile import bucket_length as bucket
-from jaxcascade._effects import (
+from jaxcascade._measured._effects import (
     EFFECTS,
     BacklashFriction,
     BacklashFrictionContacts,
@@ -28,15 +28,15 @@ from jaxcascade._effects import (
     SlackFriction,
     simulate_with_switches,
 )
-from jaxcascade._examples import example
-from jaxcascade._initial_state import (
+from jaxcascade._measured._initial_state import (
     initialise,
     innovations_from,
     rest_state,
     scored,
     simulate_from,
 )
-from jaxcascade._noise import ARNoise
+from jaxcascade._measured._noise import ARNoise
+from jaxcascade._system._examples import example
 
 
 def _a(*values):
@@ -177,7 +177,7 @@ def test_start_below_n_is_raised_to_n():
 
 
 def test_compilation_is_bounded_by_structure_and_bucket(monkeypatch):
-    import jaxcascade._initial_state as module
+    import jaxcascade._measured._initial_state as module
 
     # `_fit` runs once per trace of the module's compiled program; lengths of a bucket
     # used nowhere else make sure the first call here traces

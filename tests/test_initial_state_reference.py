@@ -21,9 +21,9 @@ import oracle_effects
 import oracle_state
 import pytest
 
-from jaxcascade._effects import InputBacklash, plain
-from jaxcascade._loop import initialised_output
-from jaxcascade._model import CascadeParams, Orders
+from jaxcascade._measured._effects import InputBacklash, plain
+from jaxcascade._measured._loop import initialised_output
+from jaxcascade._system._model import CascadeParams, Orders
 
 ORDERS = Orders(2, 2, 2, 2)
 # Example 1's static block and backlash with slower real poles (0.85, 0.7; no overshoot)

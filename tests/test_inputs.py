@@ -7,9 +7,9 @@ import pandas as pd
 import pytest
 
 from jaxcascade._cli import main
-from jaxcascade._inputs import DEFAULT_RMS, INPUTS, input_design
+from jaxcascade._experiment._inputs import DEFAULT_RMS, INPUTS, input_design
 from jaxcascade._montecarlo._spec import InputRangeWarning, Spec
-from jaxcascade._simulate import uniform_input
+from jaxcascade._system._simulate import uniform_input
 
 N = 512
 

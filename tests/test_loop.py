@@ -16,10 +16,16 @@ import pytest
 import scipy.signal
 
 import jaxcascade as jc
-from jaxcascade._effects import EFFECTS, ExtendedModel, OutputOffset, plain, simulate_extended
-from jaxcascade._loop import model_error_loop, paired_improvement
-from jaxcascade._noise import ARNoise
-from jaxcascade._testing import UNDECLARED, undeclared_record
+from jaxcascade._measured._effects import (
+    EFFECTS,
+    ExtendedModel,
+    OutputOffset,
+    plain,
+    simulate_extended,
+)
+from jaxcascade._measured._loop import model_error_loop, paired_improvement
+from jaxcascade._measured._noise import ARNoise
+from jaxcascade._measured._testing import UNDECLARED, undeclared_record
 
 SNR = 20.0
 N = 2000
@@ -180,7 +186,7 @@ def test_paired_improvement_sign():
 def test_every_effect_of_the_library_has_an_undeclared_record():
     # The hysteresis effects are tried only when the hysteresis test fails, which it
     # does on none of these records (test_diagnose); they have tests of their own below.
-    from jaxcascade._effects import HYSTERESIS
+    from jaxcascade._measured._effects import HYSTERESIS
 
     library = {*EFFECTS, ARNoise.name} - set(HYSTERESIS)
     assert library == {name for name in UNDECLARED if name is not None}
@@ -223,7 +229,7 @@ def test_loop_compiles_a_bounded_set_of_programs():
 
 
 def jaxcascade_record(model, seed, n):
-    from jaxcascade._testing import undeclared_record
+    from jaxcascade._measured._testing import undeclared_record
 
     return undeclared_record(model, jax.random.PRNGKey(seed), n, SNR, None)
 
@@ -232,7 +238,7 @@ def test_loop_replaces_the_cascade_by_a_hysteresis_path():
     # Issue 21, item 2: a friction force behind a slack with no cascade in it. The loop
     # tries the hysteresis path added to the declared cascade and in its place; the
     # replacement wins, with the true parameters, and the structure line says so.
-    from jaxcascade._effects import BacklashFriction
+    from jaxcascade._measured._effects import BacklashFriction
 
     truth = BacklashFriction(*(jnp.asarray(v) for v in (0.08, 30.0, 2.3, 2.0, 0.1)))
     rng = np.random.default_rng(3)

@@ -23,13 +23,13 @@ import pandas as pd
 import pytest
 
 from jaxcascade._cli import main
-from jaxcascade._loop_checkpoint import (
+from jaxcascade._measured._loop_checkpoint import (
     Checkpoints,
     identity,
     model_from_dict,
     model_to_dict,
 )
-from jaxcascade._testing import UNDECLARED, undeclared_record
+from jaxcascade._measured._testing import UNDECLARED, undeclared_record
 
 N = 500
 # the options that keep a loop short: two effects (two candidates in round 1), one round,
@@ -90,7 +90,7 @@ def _one_line_exit_2(capsys, argv) -> str:
 
 
 def test_interrupted_loop_resumes_to_the_uninterrupted_result(records, tmp_path, capsys):
-    from jaxcascade import _loop
+    from jaxcascade._measured import _loop
 
     # the uninterrupted run; its checkpoints are gone once its report is written
     whole = tmp_path / "whole"
@@ -166,8 +166,8 @@ def test_overwrite_starts_afresh(records, tmp_path, capsys):
 
 def test_a_stored_model_is_the_fitted_one_bit_for_bit():
     from jaxcascade import example
-    from jaxcascade._effects import ExtendedModel, OutputOffset, PrandtlIshlinskii
-    from jaxcascade._noise import ARNoise
+    from jaxcascade._measured._effects import ExtendedModel, OutputOffset, PrandtlIshlinskii
+    from jaxcascade._measured._noise import ARNoise
 
     params = example(1).params()
     path = PrandtlIshlinskii(*(jax.numpy.asarray(v) for v in ([0.1, 0.2], [0.5], [1 / 3], 0.7)))

@@ -155,8 +155,8 @@ def test_fit_saves_a_model_that_simulate_applies(loop, tmp_path, capsys):
 def test_effects_and_noise_round_trip(tmp_path):
     # Every field of an added effect, a replaced cascade and the noise model survive the
     # file, and the loaded model simulates as the saved one.
-    from jaxcascade._effects import ExtendedModel, InputDelay, OutputOffset, SlackFriction
-    from jaxcascade._model_file import SavedModel
+    from jaxcascade._measured._effects import ExtendedModel, InputDelay, OutputOffset, SlackFriction
+    from jaxcascade._measured._model_file import SavedModel
 
     f = jax.numpy.asarray
     params = jc.example(1).params()

@@ -6,12 +6,12 @@ import re
 
 from jaxcascade import _names
 from jaxcascade._benchmark._robust import SYSTEMS
-from jaxcascade._disturbance import NOISES
-from jaxcascade._effects import EFFECTS
 from jaxcascade._estimator import BUILTIN, ESTIMATORS
-from jaxcascade._inputs import INPUTS
+from jaxcascade._experiment._disturbance import NOISES
+from jaxcascade._experiment._inputs import INPUTS
+from jaxcascade._measured._effects import EFFECTS
+from jaxcascade._measured._noise import ARNoise
 from jaxcascade._montecarlo._spec import FAMILIES
-from jaxcascade._noise import ARNoise
 
 LOOP_PAGE = pathlib.Path(__file__).parents[1] / "docs" / "loop.md"
 

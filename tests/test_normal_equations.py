@@ -7,9 +7,10 @@ import oracle
 import pytest
 
 import jaxcascade
-from jaxcascade import CascadeParams, Orders, Status, _fused, example, initial_guess, measure
+from jaxcascade import CascadeParams, Orders, Status, example, initial_guess, measure
+from jaxcascade._estimator import _fused
 from jaxcascade._estimator._literal import voros_step
-from jaxcascade._normal_equations import normal_equations, resolve
+from jaxcascade._estimator._normal_equations import normal_equations, resolve
 
 fused = pytest.mark.skipif(not _fused.available(), reason=f"no fused kernel: {_fused.reason()}")
 

@@ -11,8 +11,8 @@ import scipy.signal
 import scipy.stats
 
 import jaxcascade as jc
-from jaxcascade._efficiency import crlb, fisher_information, information_factor, jacobian
-from jaxcascade._noise_filter import (
+from jaxcascade._estimator._efficiency import crlb, fisher_information, information_factor, jacobian
+from jaxcascade._experiment._noise_filter import (
     ar_from_unconstrained,
     ar_to_unconstrained,
     coefficients,
@@ -101,7 +101,7 @@ def test_coloured_bound_is_the_whitened_jacobians():
 def test_noise_bound_options_read_poles_and_zeros():
     import types
 
-    from jaxcascade._efficiency import noise_bound_options
+    from jaxcascade._estimator._efficiency import noise_bound_options
 
     arma = types.SimpleNamespace(poles=(0.9,), zeros=[0.3])
     assert noise_bound_options(arma) == {"poles": (0.9,), "zeros": (0.3,)}

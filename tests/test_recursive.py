@@ -13,16 +13,21 @@ import numpy as np
 import pytest
 
 from jaxcascade._benchmark import _recursive_baseline
-from jaxcascade._changing import Change, simulate_changing, trajectory, trajectory_traced
 from jaxcascade._cli import main
 from jaxcascade._estimator import ESTIMATORS, _recursive, estimator
 from jaxcascade._estimator._recursive import Recursive, recursive
-from jaxcascade._examples import example
-from jaxcascade._model import CascadeParams
+from jaxcascade._estimator._rls import update
+from jaxcascade._experiment._changing import (
+    Change,
+    simulate_changing,
+    trajectory,
+    trajectory_traced,
+)
 from jaxcascade._montecarlo._tracking import _measures, tracking
-from jaxcascade._online import update
-from jaxcascade._simulate import measure, simulate, uniform_input
 from jaxcascade._status import Status
+from jaxcascade._system._examples import example
+from jaxcascade._system._model import CascadeParams
+from jaxcascade._system._simulate import measure, simulate, uniform_input
 
 BOUNDS = (-2.0, 2.0)
 

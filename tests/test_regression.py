@@ -6,7 +6,7 @@ import oracle
 import pytest
 
 from jaxcascade import CascadeParams, Orders, regression, signals
-from jaxcascade._regression import solve_normal_equations
+from jaxcascade._estimator._regression import solve_normal_equations
 
 ORDERS = [Orders(2, 2, 2, 2), Orders(1, 1, 1, 0), Orders(3, 2, 3, 1), Orders(2, 3, 1, 2)]
 

@@ -9,7 +9,7 @@ import jaxcascade as jc
 from jaxcascade._estimator._basin import residual_statistic
 from jaxcascade._estimator._robust import _adaptive, _robust
 from jaxcascade._estimator._solution import PATH_ADAPTIVE, PATH_MULTISTART
-from jaxcascade._prior import random_systems
+from jaxcascade._system._prior import random_systems
 
 ORDERS = jc.Orders()
 N = 400

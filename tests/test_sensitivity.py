@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 import jaxcascade as jc
-from jaxcascade._model import CascadeParams
-from jaxcascade._sensitivity import output_jacobian
-from jaxcascade._simulate import signals
+from jaxcascade._estimator._sensitivity import output_jacobian
+from jaxcascade._system._model import CascadeParams
+from jaxcascade._system._simulate import signals
 
 POINTS = [
     (jc.Orders(), lambda o: jc.example(1).params()),

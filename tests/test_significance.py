@@ -9,7 +9,7 @@ import pytest
 import scipy.signal
 import scipy.stats
 
-from jaxcascade._significance import (
+from jaxcascade._measured._significance import (
     andrews_bandwidth,
     diebold_mariano,
     diebold_mariano_records,

@@ -17,9 +17,9 @@ import pytest
 from jaxcascade._cli import main
 from jaxcascade._estimator import estimator
 from jaxcascade._estimator._recursive import NOISE_FREE, Recursive, recursive
-from jaxcascade._examples import example
-from jaxcascade._simulate import measure, uniform_input
 from jaxcascade._status import Status, status_names
+from jaxcascade._system._examples import example
+from jaxcascade._system._simulate import measure, uniform_input
 
 BOUNDS = (-2.0, 2.0)
 
@@ -92,7 +92,7 @@ def test_under_noise_the_defaults_converge_at_the_noise_level_they_estimate():
     out = jax.vmap(lambda u, y: recursive(u, y, ex.orders, input_range=BOUNDS))(U, Y)
     assert np.all(np.asarray(out.solution.status) == Status.converged)
     assert np.max(largest_error(out.solution, ex)) < 0.05
-    from jaxcascade._simulate import simulate
+    from jaxcascade._system._simulate import simulate
 
     sigma = np.asarray([np.std(simulate(ex.params(), u)) / 25.0 for u in U])
     np.testing.assert_allclose(np.asarray(out.noise_level) / sigma, 1.0, atol=0.35)
@@ -135,7 +135,7 @@ def _numpy_validity(xi, u, lags=10):
 
 
 def _ar(pole):
-    from jaxcascade._disturbance import disturbance
+    from jaxcascade._experiment._disturbance import disturbance
 
     return disturbance("ar", poles=(pole,))
 
@@ -173,9 +173,9 @@ def test_claim_refuses_what_the_model_cannot_describe_and_keeps_the_truth(noise)
     # wide is refused too (its error is the Jacobian's: robust's own estimation error
     # under coloured noise is of that kind, and the projection lets it pass).
     from jaxcascade._estimator._basin import claim
-    from jaxcascade._model import CascadeParams
-    from jaxcascade._sensitivity import output_jacobian
-    from jaxcascade._simulate import add_noise, simulate
+    from jaxcascade._estimator._sensitivity import output_jacobian
+    from jaxcascade._system._model import CascadeParams
+    from jaxcascade._system._simulate import add_noise, simulate
 
     ex = example(1)
     key_u, key_e = jax.random.split(jax.random.PRNGKey(5))

@@ -10,8 +10,8 @@ import pytest
 
 import jaxcascade as jc
 from jaxcascade._cli import main
-from jaxcascade._effects import plain
-from jaxcascade._loop import evaluate, initialised_output, model_error_loop
+from jaxcascade._measured._effects import plain
+from jaxcascade._measured._loop import evaluate, initialised_output, model_error_loop
 
 ORDERS = jc.Orders(2, 2, 2, 2)
 

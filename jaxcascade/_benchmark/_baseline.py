@@ -22,8 +22,8 @@ from typing import NamedTuple
 import numpy as np
 from scipy.signal import lfilter
 
-from .._model import Orders
 from .._status import Status
+from .._system._model import Orders
 
 _RUNNING = -1
 

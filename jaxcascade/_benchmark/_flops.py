@@ -21,7 +21,7 @@ import time
 
 import numpy as np
 
-from .._model import Orders
+from .._system._model import Orders
 
 
 def flops_per_fit(orders: Orders | None = None, n: int = 4000, iterations: int = 20) -> dict:

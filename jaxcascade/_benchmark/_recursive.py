@@ -18,7 +18,7 @@ import time
 import numpy as np
 
 from .._compile import compiler_options
-from .._examples import example as get_example
+from .._system._examples import example as get_example
 from . import _recursive_baseline
 from ._timing import device_description, peak_rss_mb
 
@@ -40,7 +40,7 @@ def records(example_number: int, realisations: int, n: int, seed: int = 0):
     `jaxcascade reproduce` draws one (input and noise keys the halves of one key)."""
     import jax
 
-    from .._simulate import measure, uniform_input
+    from .._system._simulate import measure, uniform_input
 
     ex = get_example(example_number)
     truth = ex.params()

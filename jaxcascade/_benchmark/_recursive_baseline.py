@@ -16,7 +16,7 @@ import time
 
 import numpy as np
 
-from .._model import Orders
+from .._system._model import Orders
 from ._baseline import initial_guess, is_admissible, measure, unpack
 
 

@@ -26,8 +26,8 @@ import time
 import numpy as np
 
 from .._compile import compiler_options
-from .._examples import example as get_example
-from .._model import Orders
+from .._system._examples import example as get_example
+from .._system._model import Orders
 from . import _baseline
 from ._timing import device_description, peak_rss_mb
 
@@ -62,8 +62,8 @@ def _record(system: str, n: int, snr: float):
     """`key -> (u, y, truth vector, fit key)`: one record of the workload."""
     import jax
 
-    from .._prior import random_system
-    from .._simulate import measure, uniform_input
+    from .._system._prior import random_system
+    from .._system._simulate import measure, uniform_input
 
     number = SYSTEMS[system][0]
     orders = Orders()

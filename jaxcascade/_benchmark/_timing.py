@@ -38,7 +38,7 @@ import time
 import numpy as np
 
 from .._compile import compiler_options
-from .._examples import example as get_example
+from .._system._examples import example as get_example
 from . import _baseline, _flops
 
 # Settings of `voros` (and of the baseline's) that never stop early: a fixed workload.
@@ -105,10 +105,10 @@ def batched_fit(
     import jax
     import jax.numpy as jnp
 
-    from .._batching import chunked_vmap
     from .._estimator._literal import voros
-    from .._normal_equations import resolve
-    from .._simulate import measure, uniform_input
+    from .._estimator._normal_equations import resolve
+    from .._system._simulate import measure, uniform_input
+    from ._batching import chunked_vmap
 
     ex = get_example(example_number)
     dtype = dtype or jnp.result_type(float)
@@ -148,8 +148,8 @@ def run_jax(
     import jax
     import jax.numpy as jnp
 
-    from .._batching import host_threads, host_workers, split_batch
-    from .._normal_equations import resolve
+    from .._estimator._normal_equations import resolve
+    from ._batching import host_threads, host_workers, split_batch
 
     dtype = jnp.result_type(float)
     params = get_example(example_number).params(dtype)

@@ -65,7 +65,7 @@ def _robust_report(r: dict) -> str:
 
 def run_robust_bench(args) -> int:
     from .._benchmark import _robust as robust_bench
-    from .._model import Orders
+    from .._system._model import Orders
 
     n = args.n if args.n is not None else robust_bench.system_defaults(args.system)[0]
     realisations = args.realisations if args.realisations is not None else 256
@@ -111,7 +111,7 @@ def _recursive_report(r: dict) -> str:
 
 def run_recursive_bench(args) -> int:
     from .._benchmark import _recursive as recursive_bench
-    from .._examples import example as get_example
+    from .._system._examples import example as get_example
 
     ex = get_example(args.example)
     n = args.n if args.n is not None else ex.n_samples
@@ -151,7 +151,7 @@ def run_bench(args) -> int:
     # imported here, not at the top: `--help` answers without importing JAX
     from .._benchmark._timing import run_benchmark, summary
     from .._estimator import lookup
-    from .._examples import example as get_example
+    from .._system._examples import example as get_example
 
     try:
         lookup(args.estimator)  # a user's estimator: registered or an entry point

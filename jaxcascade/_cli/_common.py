@@ -140,7 +140,7 @@ def record_options(args) -> dict:
 
 def parse_orders(text: str):
     """`--orders nR,nL,r,p` as `Orders`, or a CLIError naming the option."""
-    from .._model import Orders
+    from .._system._model import Orders
 
     try:
         return Orders.parse(text)

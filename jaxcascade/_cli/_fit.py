@@ -40,7 +40,7 @@ def fit_record(u, y, orders, name: str = _defaults.ESTIMATOR, **settings):
     import numpy as np
 
     from .._estimator import estimator
-    from .._validate import record as checked
+    from .._system._validate import record as checked
 
     u, y = checked(u, y, orders=orders, where="fit")
     solution = jax.device_get(estimator(name, **settings)(u, y, orders))
@@ -57,10 +57,10 @@ def _after_fit():
     the free-run simulation, its NRMSE on the record (`_metrics.nrmse`) and the standard
     errors. Built on first use: the command line's module imports no JAX."""
     from .._compile import exported
-    from .._efficiency import standard_errors
+    from .._estimator._efficiency import standard_errors
     from .._metrics import nrmse
-    from .._model import CascadeParams
-    from .._simulate import simulate
+    from .._system._model import CascadeParams
+    from .._system._simulate import simulate
 
     @exported
     def after_fit(params, u, y):
@@ -80,8 +80,8 @@ def _after_fit():
 def run_fit(args) -> int:
     # imported here, not at the top: `--help` answers without importing JAX
     from .._data import read_record
-    from .._efficiency import not_identifiable
     from .._estimator import estimator
+    from .._estimator._efficiency import not_identifiable
     from .._metrics import fit_percent
     from .._status import Status
 
@@ -124,8 +124,8 @@ def run_fit(args) -> int:
         result["scaling"] = record.scaling.to_dict()
     code = FAILED if status.failure and not (partial and unknown) else 0
     if args.save_model:
-        from .._effects import plain
-        from .._model_file import SavedModel
+        from .._measured._effects import plain
+        from .._measured._model_file import SavedModel
 
         fitted = plain(solution.params)
         provenance = {"command": "jaxcascade fit " + " ".join(sys.argv[2:]), "status": status.name}

@@ -164,8 +164,8 @@ def _markdown(report: dict, command: str) -> str:
 def _final_model(model, errors: dict, scaling) -> dict:
     """The report's final model: its structure, its equations and every estimate with its
     standard error (model units), the cascade's also in the records' units."""
-    from .._effects import backlash_of
-    from .._loop import model_estimates
+    from .._measured._effects import backlash_of
+    from .._measured._loop import model_estimates
 
     values = model_estimates(model)
     physical = {}
@@ -376,12 +376,12 @@ def _run_loop(args, checkpoints) -> int:
     import jax
     import numpy as np
 
-    from .._arx import best_arx
     from .._estimator._robust import Robust
-    from .._loop import initialised_output, model_error_loop, simulated_output
+    from .._measured._arx import best_arx
+    from .._measured._loop import initialised_output, model_error_loop, simulated_output
+    from .._measured._scoring import score_record, verdict
     from .._plot._loop import plot_compare
     from .._plot._residuals import save_residual_figures
-    from .._scoring import score_record, verdict
 
     orders = parse_orders(args.orders)
     if args.max_effects < 0:
@@ -443,7 +443,7 @@ def _run_loop(args, checkpoints) -> int:
     # difference and integrated back for scoring (`_integrating`).
     integrating = None
     if args.integrate != "no":
-        from .._integrating import integrates
+        from .._measured._integrating import integrates
 
         pole = integrates(
             np.concatenate([r.u for r in training]), np.concatenate([r.y for r in training])
@@ -453,7 +453,7 @@ def _run_loop(args, checkpoints) -> int:
     scored_records = (validations, tests)
     estimation = list(training)  # as measured (the loop may model their difference)
     if integrating is not None:
-        from .._integrating import differenced
+        from .._measured._integrating import differenced
 
         training = [differenced(r) for r in training]
         validations = [differenced(v) for v in validations]
@@ -519,7 +519,7 @@ def _run_loop(args, checkpoints) -> int:
         ),
     }
     if integrating is not None:
-        from .._integrating import integrated
+        from .._measured._integrating import integrated
 
         models = {name: integrated(*pair) for name, pair in models.items()}
         validations = scored_records[0]  # scored as measured, the output integrated back
@@ -604,7 +604,7 @@ def _run_loop(args, checkpoints) -> int:
     if folder is not None:
         command = "jaxcascade loop " + " ".join(sys.argv[2:])
         (folder / "report.json").write_text(strict_json(full, indent=1))
-        from .._model_file import SavedModel  # the final model, for `jaxcascade simulate`
+        from .._measured._model_file import SavedModel  # the final model, for `jaxcascade simulate`
 
         saved = SavedModel.from_record(
             result.final,
@@ -627,7 +627,7 @@ def _run_loop(args, checkpoints) -> int:
         shown = validations[0]
         units = _units(args.output or "y", scaling.method)
         if integrating is not None:
-            from .._integrating import differenced
+            from .._measured._integrating import differenced
 
             shown, units = differenced(shown), f"difference of {units}"
         period = shown.sample_period
@@ -793,8 +793,8 @@ def _benchmark_records(args, orders):
     """Estimation, validation and test records of a benchmark (`BENCHMARK_RULE`)."""
     import numpy as np
 
-    from .._benchmark_data import benchmark_data
     from .._data import Scaling, record_from_arrays
+    from .._measured._benchmark_data import benchmark_data
 
     if args.train or args.validate or args.test:
         raise CLIError(
@@ -877,7 +877,7 @@ def _mean_score(scores):
     (a window applies to one record only)."""
     import numpy as np
 
-    from .._scoring import RecordScore
+    from .._measured._scoring import RecordScore
 
     if len(scores) == 1:
         return scores[0]
@@ -931,8 +931,8 @@ def _effects(text: str | None) -> tuple[str, ...] | None:
     """`--effects a,b`: names of the library (and the noise model) the loop considers."""
     if text is None:
         return None
-    from .._effects import EFFECTS
-    from .._noise import ARNoise
+    from .._measured._effects import EFFECTS
+    from .._measured._noise import ARNoise
 
     names = tuple(name.strip() for name in text.split(",") if name.strip())
     unknown = [name for name in names if name not in {*EFFECTS, ARNoise.name}]

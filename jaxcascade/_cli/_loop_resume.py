@@ -43,7 +43,7 @@ def add_arguments(parser) -> None:
 def run_kept(args, run) -> int:
     """`run(args, checkpoints)`, the loop with its checkpoints in `--report`; on Ctrl-C a
     partial report and exit code 130; the checkpoints deleted once `run` returns."""
-    from .._loop_checkpoint import Checkpoints
+    from .._measured._loop_checkpoint import Checkpoints
 
     if (args.resume or args.overwrite) and not args.report:
         raise CLIError(

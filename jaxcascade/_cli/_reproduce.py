@@ -35,7 +35,7 @@ def run_example(
     import jax
 
     from .._estimator import estimator
-    from .._simulate import measure, uniform_input
+    from .._system._simulate import measure, uniform_input
 
     dtype = dtype or jax.numpy.result_type(float)
     snr = ex.snr if snr is None else snr
@@ -75,9 +75,9 @@ def _markdown(table, header: str) -> str:
 def reproduce(args) -> int:
     # imported here, not at the top: `--help` answers without importing JAX
     from .._estimator import lookup
-    from .._examples import example
     from .._plot._trajectory import plot_trajectories
     from .._status import Status
+    from .._system._examples import example
 
     ex = example(args.example)
     if not args.snr > 0:

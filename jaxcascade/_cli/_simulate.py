@@ -30,7 +30,7 @@ def run_simulate(args) -> int:
     import pathlib
 
     from .._data import read_record
-    from .._model_file import load_model
+    from .._measured._model_file import load_model
     from ._loop import _name
 
     if args.init_samples is not None and args.init_samples < 0:

@@ -11,7 +11,7 @@ from typing import Any, ClassVar
 import equinox as eqx
 from jaxtyping import Array, Float, PRNGKeyArray
 
-from .._model import Orders
+from .._system._model import Orders
 from ._solution import Solution
 
 

@@ -46,8 +46,8 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
+from .._experiment._noise_filter import fit_ar, whiten
 from .._linalg import spd_solve
-from .._noise_filter import fit_ar, whiten
 from .._status import Status
 
 # the noise model that whitens a residual before the validity tests (`pem`'s defaults)

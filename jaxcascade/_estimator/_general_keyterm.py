@@ -43,12 +43,11 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from .._compile import filter_jit
-from .._general_backlash import GeneralBacklash, general_switches
-from .._model import CascadeParams, Orders
-from .._regression import key_term_columns, solve_gram
-from .._simulate import linear_block, pwl, shift
 from .._status import Status
-from .._validate import record
+from .._system._general_backlash import GeneralBacklash, general_switches
+from .._system._model import CascadeParams, Orders
+from .._system._simulate import linear_block, pwl, shift
+from .._system._validate import record
 from ._literal import (
     _RUNNING,
     cycle_detection,
@@ -57,6 +56,7 @@ from ._literal import (
     standard_errors,
     stopping_rule,
 )
+from ._regression import key_term_columns, solve_gram
 
 
 class KeyTermGeneral(eqx.Module):

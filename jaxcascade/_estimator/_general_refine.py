@@ -21,11 +21,11 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .._compile import filter_jit
-from .._general_backlash import GeneralBacklash, branch_report, general_backlash
-from .._model import CascadeParams
-from .._simulate import linear_block, pwl
 from .._status import Status
-from .._validate import record
+from .._system._general_backlash import GeneralBacklash, branch_report, general_backlash
+from .._system._model import CascadeParams
+from .._system._simulate import linear_block, pwl
+from .._system._validate import record
 from ._refine import from_unconstrained, least_squares, to_unconstrained
 
 

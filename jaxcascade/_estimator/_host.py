@@ -33,8 +33,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._model import CascadeParams, Orders, is_admissible
 from .._status import Status
+from .._system._model import CascadeParams, Orders, is_admissible
 from ._base import _describe, _matches, keyword_defaults
 from ._basin import claim
 from ._robust import DEFAULTS as ROBUST
@@ -89,7 +89,7 @@ class HostEstimator:
 
 @jax.jit
 def _claim(params, residual, u, y):
-    from .._sensitivity import output_jacobian
+    from ._sensitivity import output_jacobian
 
     inside = is_admissible(params, jnp.min(u), jnp.max(u))
     status = jnp.where(inside, Status.converged, Status.left_domain)
@@ -120,7 +120,7 @@ class HostFit:
 
     def solution(self, vector: np.ndarray, u, y, orders: Orders) -> Solution:
         """The `Solution` of a returned vector (module docstring)."""
-        from .._simulate import simulate
+        from .._system._simulate import simulate
 
         ok = bool(np.all(np.isfinite(vector)))
         safe = np.where(ok, vector, 0.0)

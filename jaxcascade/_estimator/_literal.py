@@ -12,8 +12,11 @@ import numpy as np
 from jaxtyping import Array, Float, PRNGKeyArray
 
 from .._compile import jit
-from .._model import CascadeParams, Orders, is_admissible
-from .._normal_equations import (
+from .._status import Status
+from .._system._model import CascadeParams, Orders, is_admissible
+from .._system._validate import is_traced, record
+from ._base import Estimator, keyword_defaults, setting
+from ._normal_equations import (
     FIRST_STEPS,
     from_regression,
     normal_equations,
@@ -22,9 +25,6 @@ from .._normal_equations import (
     solve_step,
     step_regression,
 )
-from .._status import Status
-from .._validate import is_traced, record
-from ._base import Estimator, keyword_defaults, setting
 from ._solution import PATH_ONLY, Solution, finite
 
 _RUNNING = -1

@@ -50,8 +50,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float, PRNGKeyArray
 
 from .._compile import jit
-from .._model import Orders, is_admissible
-from .._noise_filter import (
+from .._experiment._noise_filter import (
     CRITERIA,
     ar_from_unconstrained,
     ar_to_unconstrained,
@@ -59,15 +58,16 @@ from .._noise_filter import (
     lagged,
     whiten,
 )
-from .._sensitivity import output_jacobian
 from .._status import Status
-from .._validate import record
+from .._system._model import Orders, is_admissible
+from .._system._validate import record
 from ._base import Estimator, keyword_defaults, setting
 from ._basin import claim, off_edge, residual_statistic
 from ._levenberg import levenberg_marquardt
 from ._refine import _chain, from_unconstrained, simulation_error, to_unconstrained
 from ._robust import DEFAULTS as ROBUST
 from ._robust import _adaptive, _fallback, _multistart, judge
+from ._sensitivity import output_jacobian
 from ._solution import Solution, finite
 
 

@@ -149,13 +149,14 @@ import numpy as np
 from jaxtyping import Array, Float, Int, PRNGKeyArray
 
 from .._compile import jit
-from .._model import CascadeParams, Orders, is_admissible
-from .._online import ANTI_WINDUP, forgetting, sample_regression, update, window
-from .._simulate import pwl
 from .._status import Status
-from .._validate import is_traced, record
+from .._system._model import CascadeParams, Orders, is_admissible
+from .._system._simulate import pwl
+from .._system._validate import is_traced, record
 from ._base import Estimator, keyword_defaults, setting
 from ._literal import initial_guess
+from ._rls import ANTI_WINDUP, forgetting, update
+from ._rls_regressor import sample_regression, window
 from ._solution import PATH_ONLY, Solution, finite
 
 

@@ -18,11 +18,11 @@ import jax.numpy as jnp
 import optimistix as optx
 from jaxtyping import Array, Float
 
-from .._model import CascadeParams, Orders, reflection_coefficients
-from .._sensitivity import output_jacobian
-from .._simulate import signals
 from .._status import Status
+from .._system._model import CascadeParams, Orders, reflection_coefficients
+from .._system._simulate import signals
 from ._levenberg import levenberg_marquardt
+from ._sensitivity import output_jacobian
 
 _REFLECTION_LIMIT = 0.999
 

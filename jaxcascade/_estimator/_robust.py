@@ -81,17 +81,17 @@ import jax.numpy as jnp
 from jax.custom_batching import custom_vmap
 from jaxtyping import Array, Float, PRNGKeyArray
 
-from .. import _fused
 from .._compile import exported
-from .._model import CascadeParams, Orders, is_admissible
-from .._prior import random_systems
-from .._sensitivity import output_jacobian
 from .._status import Status
-from .._validate import record
+from .._system._model import CascadeParams, Orders, is_admissible
+from .._system._prior import random_systems
+from .._system._validate import record
+from . import _fused
 from ._base import Estimator, keyword_defaults, setting
 from ._basin import claim, residual_statistic
 from ._literal import initial_guess, voros
 from ._refine import refine, simulation_error
+from ._sensitivity import output_jacobian
 from ._solution import PATH_ADAPTIVE, PATH_MULTISTART, Solution, finite
 
 # Step 1's start where the literal iteration ends unusable (singular, out of the domain,

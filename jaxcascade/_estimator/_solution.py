@@ -8,8 +8,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
 
-from .._model import CascadeParams
 from .._status import Status, status_names
+from .._system._model import CascadeParams
 
 # `Solution.path`: which of an estimator's paths gave the estimate.
 PATH_ONLY = 0  # the estimator has one path (the literal iteration)

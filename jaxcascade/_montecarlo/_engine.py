@@ -69,15 +69,15 @@ import jax.numpy as jnp
 import numpy as np
 import pandas as pd
 
-from .._changing import Change, simulate_changing, trajectory_traced
 from .._compile import compiler_options
-from .._efficiency import crlb, noise_bound_options
 from .._estimator import estimator, is_host
+from .._estimator._efficiency import crlb, noise_bound_options
+from .._estimator._normal_equations import resolve
+from .._experiment._changing import Change, simulate_changing, trajectory_traced
 from .._metrics import nrmse
-from .._model import CascadeParams, is_admissible
-from .._normal_equations import resolve
-from .._prior import random_system
-from .._simulate import add_noise, simulate
+from .._system._model import CascadeParams, is_admissible
+from .._system._prior import random_system
+from .._system._simulate import add_noise, simulate
 from ._spec import Cell, Spec
 from ._tables import realisation_frame
 from ._tracking import tracking_samples
@@ -316,8 +316,8 @@ def _compiled(orders, n, experiment, name, settings, batched, family=None, chang
     """The jitted (optionally vmapped) realisation function of one cell shape;
     `experiment` is the spec's `_experiment` (input and noise, hashable)."""
     spec_input, input_settings, spec_noise, noise_settings = experiment
-    from .._disturbance import disturbance
-    from .._inputs import input_design
+    from .._experiment._disturbance import disturbance
+    from .._experiment._inputs import input_design
 
     design = input_design(spec_input, **dict(input_settings))
     one = functools.partial(
@@ -412,8 +412,8 @@ def _host_programs(orders, n, experiment, family, change=None):
     """The batched draw and score of a cell shape whose estimator runs on the host (or
     whose records `records` returns)."""
     spec_input, input_settings, spec_noise, noise_settings = experiment
-    from .._disturbance import disturbance
-    from .._inputs import input_design
+    from .._experiment._disturbance import disturbance
+    from .._experiment._inputs import input_design
 
     design = input_design(spec_input, **dict(input_settings))
     draw = functools.partial(

@@ -62,12 +62,12 @@ from typing import Any, NamedTuple
 
 import jax.numpy as jnp
 
-from .._changing import Change, trajectory
-from .._disturbance import NOISES, Disturbance, disturbance
 from .._estimator import estimator
-from .._examples import EXAMPLES
-from .._inputs import INPUTS, InputDesign, input_design
-from .._model import CascadeParams, Orders
+from .._experiment._changing import Change, trajectory
+from .._experiment._disturbance import NOISES, Disturbance, disturbance
+from .._experiment._inputs import INPUTS, InputDesign, input_design
+from .._system._examples import EXAMPLES
+from .._system._model import CascadeParams, Orders
 
 INPUT_KINDS = tuple(INPUTS)
 NOISE_KINDS = tuple(NOISES)
@@ -569,7 +569,7 @@ def _known(table: dict, name: str, kind, registry) -> None:
     if not isinstance(kind, str) or kind not in registry:
         return  # the spec names the unknown kind itself
     if name == "input":
-        from .._inputs import known_settings
+        from .._experiment._inputs import known_settings
 
         known = known_settings(kind)
     else:

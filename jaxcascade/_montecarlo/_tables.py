@@ -171,7 +171,7 @@ def tracking_summary(table: pd.DataFrame) -> pd.DataFrame:
 def true_trajectory(spec) -> pd.DataFrame:
     """The true parameters of a sweep of a system that changes at the samples where the
     estimate is recorded (`_tracking.tracking_samples`), one row per N and sample."""
-    from .._changing import trajectory
+    from .._experiment._changing import trajectory
     from ._tracking import tracking_samples
 
     every = dict(spec.estimator_settings("recursive"))["every"]

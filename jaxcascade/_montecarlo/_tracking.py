@@ -27,10 +27,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._changing import Change, simulate_changing, trajectory
 from .._estimator._recursive import recursive
-from .._model import CascadeParams
-from .._simulate import uniform_input
+from .._experiment._changing import Change, simulate_changing, trajectory
+from .._system._model import CascadeParams
+from .._system._simulate import uniform_input
 
 # re-entry: every parameter back within this distance of the new truth
 BAND = 0.05

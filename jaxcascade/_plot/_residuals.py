@@ -151,7 +151,13 @@ def plot_hysteresis(test, ax=None):
 
 def plot_test(test):
     """A new figure for one test of a `ResidualTests`."""
-    from .._diagnose import CorrelationTest, DriftTest, GroupTest, HysteresisTest, SpectrumTest
+    from .._measured._diagnose import (
+        CorrelationTest,
+        DriftTest,
+        GroupTest,
+        HysteresisTest,
+        SpectrumTest,
+    )
 
     if isinstance(test, HysteresisTest):
         return plot_hysteresis(test)

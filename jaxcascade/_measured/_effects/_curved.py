@@ -32,9 +32,9 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from .._compile import filter_jit, pad
-from .._general_backlash import GeneralBacklash, branch_report, general_switches
-from .._model import CascadeParams
+from ..._compile import filter_jit, pad
+from ..._system._general_backlash import GeneralBacklash, branch_report, general_switches
+from ..._system._model import CascadeParams
 from ._base import Effect, ExtendedModel, Start, _batched, _repeat, simulate_with_switches
 
 _switches = filter_jit(simulate_with_switches)

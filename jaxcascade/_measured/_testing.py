@@ -10,6 +10,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._system._examples import example
+from .._system._general_backlash import general_example
+from .._system._model import CascadeParams
+from .._system._simulate import uniform_input
 from ._effects import (
     CurvedBacklash,
     ExtendedModel,
@@ -21,11 +25,7 @@ from ._effects import (
     plain,
     simulate_extended,
 )
-from ._examples import example
-from ._general_backlash import general_example
-from ._model import CascadeParams
 from ._noise import ARNoise
-from ._simulate import uniform_input
 
 
 def _example1():

@@ -33,13 +33,13 @@ from typing import Any
 
 import numpy as np
 
-from ._data import Record, Scaling, record_from_arrays
+from .._data import Record, Scaling, record_from_arrays
+from .._metrics import fit_percent
+from .._system._model import CascadeParams, Orders
+from .._version import __version__
 from ._effects import EFFECTS, ExtendedModel
-from ._metrics import fit_percent
-from ._model import CascadeParams, Orders
 from ._noise import ARNoise
 from ._scoring import RecordScore, score_record
-from ._version import __version__
 
 FORMAT = "jaxcascade-model"
 FORMAT_VERSION = 1

@@ -29,10 +29,10 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from .._general_backlash import GeneralBacklash, general_signals
-from .._model import CascadeParams, Orders
+from ..._system._general_backlash import GeneralBacklash, general_signals
+from ..._system._model import CascadeParams, Orders
+from ..._system._simulate import signals
 from .._noise import ARNoise
-from .._simulate import signals
 
 
 class Effect(eqx.Module):

@@ -11,8 +11,8 @@ from __future__ import annotations
 
 from jaxtyping import Array, Float
 
-from .._model import CascadeParams, Orders
-from .._regression import regression
+from .._system._model import CascadeParams, Orders
+from ._regression import regression
 
 
 def window(orders: Orders) -> int:

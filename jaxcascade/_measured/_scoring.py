@@ -24,7 +24,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ._metrics import score
+from .._metrics import score
 
 # `initialised(u, y, start, n) -> simulated output on [start, T)`, the state set from `y`
 # on `[start - n, start)`; `from_rest(u) -> simulated output on [0, T)`.

@@ -46,7 +46,15 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array
 
-from ._compile import bound, compile_count, exported, filter_jit, pack, pad
+from .._compile import bound, compile_count, exported, filter_jit, pack, pad
+from .._estimator._efficiency import standard_errors
+from .._estimator._refine import from_unconstrained, least_squares, to_unconstrained
+from .._estimator._robust import Robust
+from .._metrics import score
+from .._system._general_backlash import general_switches
+from .._system._model import CascadeParams, Orders
+from .._system._simulate import backlash_switches
+from .._system._validate import record
 from ._diagnose import ResidualTests, regime_from_switches, residual_tests
 from ._effects import (
     EFFECTS,
@@ -60,10 +68,6 @@ from ._effects import (
     plain,
     simulate_with_switches,
 )
-from ._efficiency import standard_errors
-from ._estimator._refine import from_unconstrained, least_squares, to_unconstrained
-from ._estimator._robust import Robust
-from ._general_backlash import general_switches
 from ._initial_state import initialise
 from ._loop_checkpoint import (
     Checkpoints,
@@ -73,8 +77,6 @@ from ._loop_checkpoint import (
     params_from_dict,
     params_to_dict,
 )
-from ._metrics import score
-from ._model import CascadeParams, Orders
 from ._noise import ARNoise
 from ._significance import (
     BANDWIDTH_RULE,
@@ -84,8 +86,6 @@ from ._significance import (
     diebold_mariano,
     diebold_mariano_records,
 )
-from ._simulate import backlash_switches
-from ._validate import record
 
 # Compiled once per model structure and record-length bucket (`_compile.bucket_length`:
 # the loop simulates the same models on the same records many times, and a record of a

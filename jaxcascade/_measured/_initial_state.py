@@ -47,13 +47,13 @@ import numpy as np
 from jax.flatten_util import ravel_pytree
 from jaxtyping import Array, Float
 
-from ._compile import exported, pad
+from .._compile import exported, pad
+from .._estimator._refine import least_squares
+from .._metrics import score
+from .._system._general_backlash import general_backlash
+from .._system._model import CascadeParams
+from .._system._simulate import _poles_blocked, _poles_scan, backlash_switches, pwl
 from ._effects._base import EffectState, ExtendedModel, backlash_of, recent
-from ._estimator._refine import least_squares
-from ._general_backlash import general_backlash
-from ._metrics import score
-from ._model import CascadeParams
-from ._simulate import _poles_blocked, _poles_scan, backlash_switches, pwl
 
 # Start positions of each operator in an initial-state fit: fractions of its
 # admissible range (0: against the lower limit, 1: the upper one).

@@ -8,9 +8,9 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from . import _linalg
-from ._model import CascadeParams
-from ._simulate import backlash_switches, heaviside, shift
+from .. import _linalg
+from .._system._model import CascadeParams
+from .._system._simulate import backlash_switches, heaviside, shift
 
 
 class Regression(NamedTuple):

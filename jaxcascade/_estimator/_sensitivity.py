@@ -27,8 +27,8 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from ._model import CascadeParams
-from ._simulate import backlash_switches, shift
+from .._system._model import CascadeParams
+from .._system._simulate import backlash_switches, shift
 
 
 def _shift_rows(matrix, lag: int):

@@ -55,8 +55,18 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from .._compile import filter_jit, jit, pack, pad
-from .._hysteresis import (
+from ..._compile import filter_jit, jit, pack, pad
+from ._base import (
+    Effect,
+    EffectState,
+    ExtendedModel,
+    Start,
+    _batched,
+    _repeat,
+    recent,
+    simulate_extended,
+)
+from ._operators import (
     backlash_friction,
     backlash_friction_from,
     backlash_friction_limits,
@@ -69,16 +79,6 @@ from .._hysteresis import (
     stop_operator,
     stop_operators,
     stop_operators_from,
-)
-from ._base import (
-    Effect,
-    EffectState,
-    ExtendedModel,
-    Start,
-    _batched,
-    _repeat,
-    recent,
-    simulate_extended,
 )
 
 _SIGNATURE = ("hysteresis",)
@@ -357,7 +357,7 @@ class BacklashFriction(_LinearPath):
 def _fit_backlash_friction(z0, groups, weights, starts, max_steps):
     """Levenberg-Marquardt of `BacklashFriction.fit` from `z0` on packed records
     (`_compile.pack`): one compiled program per record buckets, not per call."""
-    from .._estimator._refine import least_squares
+    from ..._estimator._refine import least_squares
 
     def residual(z, args):
         g, k, up, lo = jnp.exp(z[:4])

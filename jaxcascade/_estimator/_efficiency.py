@@ -54,10 +54,10 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from . import _linalg
-from ._model import CascadeParams
-from ._noise_filter import coefficients, variance_ratio, whiten
-from ._simulate import simulate
+from .. import _linalg
+from .._experiment._noise_filter import coefficients, variance_ratio, whiten
+from .._system._model import CascadeParams
+from .._system._simulate import simulate
 
 
 def jacobian(params: CascadeParams, u: Float[Array, " T"]) -> Float[Array, "T P"]:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from typing import ClassVar
 
-from .._simulate import uniform_input
+from ..._system._simulate import uniform_input
 from ._base import InputDesign, one_scale, setting
 
 

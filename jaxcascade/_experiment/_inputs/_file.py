@@ -24,7 +24,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._data import read_column
+from ..._data import read_column
 from ._base import DEFAULT_RMS, InputDesign, one_scale, setting
 
 SEGMENTS = ("random", "whole")

@@ -23,8 +23,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from ._model import CascadeParams, Orders
-from ._simulate import backlash_switches, heaviside
+from .._system._model import CascadeParams, Orders
+from .._system._simulate import backlash_switches, heaviside
 
 
 @dataclasses.dataclass(frozen=True)

@@ -22,8 +22,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from ._linalg import spd_solve
-from ._model import reflection_coefficients
+from .._linalg import spd_solve
+from .._system._model import reflection_coefficients
 
 CRITERIA = ("aic", "bic", "none")
 

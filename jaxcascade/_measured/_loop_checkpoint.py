@@ -37,8 +37,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._system._model import CascadeParams, Orders
 from ._effects import EFFECTS, Effect, ExtendedModel
-from ._model import CascadeParams, Orders
 from ._noise import ARNoise
 
 # the run's identity, written first: its presence marks a folder of checkpoints

@@ -28,10 +28,10 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from .._system._model import CascadeParams
+from .._system._simulate import linear_block, pwl
 from . import _fused
-from ._model import CascadeParams
 from ._regression import Regression, regression, solve_gram
-from ._simulate import linear_block, pwl
 
 BACKENDS = ("auto", "xla", "fused")
 
