@@ -23,7 +23,7 @@ peak resident memory (`wait4`), its largest count of memory mappings (sampled ev
 Every scored figure is initialised as the nonlinear benchmarks do (the model's state set
 from the measured force on the `--init-samples` samples before the window, never its
 parameters) with the from-rest figure beside it. Peers: the linear ARX model (same
-convention), a LuGre model of our own (`_hysteresis.fit_lugre` on the same estimation
+convention), a LuGre model of our own (`_effects._operators.fit_lugre` on the same estimation
 records, from the displacement alone, from rest), and the published figures (Coble et al.
 2024, which use the measured force at every sample). No figure is typed in but the
 published ones.

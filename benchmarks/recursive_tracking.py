@@ -10,7 +10,7 @@ block; the block stays stable), and both gaps at once, `cL` 0.2 -> 0.3 with `cR`
 0.45 (the backlash widens on both sides; `[system.change]` with lists). One on-line pass
 of `Recursive` per realisation with a constant forgetting factor after its start:
 `lam_k = min(lam, 1 - 1/(10 + 0.1 k + 3e-4 k^2))`
-(`_online.forgetting`), lam in {0.99, 0.995, 0.999}, the estimate kept every `--every`
+(`_rls.forgetting`), lam in {0.99, 0.995, 0.999}, the estimate kept every `--every`
 samples (`_montecarlo._tracking`). Per change x lam: the fraction within 0.05 of the
 truth just before the change, the fraction that re-enters (every parameter back within
 0.05 of the new truth), the re-entry time (samples after the change; mean and median

@@ -13,7 +13,7 @@ Example 1 (input uniform in (-2, 2)); realisation i is the record `jaxcascade re
   `lam_k = 1 - 1 / (10 + 0.1 k + 3e-4 k^2)` tends to 1 (the memory starts at 10 samples
   after the on-line first iteration, whose information is kept, and grows slowly, then
   like k^2: early regressors, built from poor estimates, fade, and the later record
-  tends to equal weights; `_online.forgetting`);
+  tends to equal weights; `_rls.forgetting`);
 - `recursive_gradient`: the same schedule, the gain's regressor the gradient of the
   key-term prediction (`gradient=True`, the recursive prediction-error form);
 - `recursive_linear`: the previous default, a memory that grows linearly only,

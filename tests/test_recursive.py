@@ -1,5 +1,5 @@
 """The recursive least-squares form of the paper's estimator (`Recursive`, `recursive`),
-its update (`_online`), systems that change (`_changing`) and the tracking study.
+its update (`_estimator._rls`), systems that change (`_changing`) and the tracking study.
 
 The plain NumPy loop of the same recursion (`_benchmark._recursive_baseline`) is the
 oracle of the scan. Noise-free records are those of `jaxcascade reproduce --example N

@@ -8,8 +8,8 @@ using the known recursive least-squares algorithm". Here each sample t
    whole record: `v(t-i)` from the piecewise-linear block (eq. 21) at the window's
    inputs, `x(t)` from the linear block's recursion (eq. 22) on the past `x` the
    recursion itself produced, then g1, g2 (eqs. 23-24), `yc(t)` (eq. 25) and `phi(t)`
-   (eq. 17; `_online.sample_regression`);
-2. updates theta by recursive least squares (`_online.update`) on the a-priori error
+   (eq. 17; `_rls_regressor.sample_regression`);
+2. updates theta by recursive least squares (`_rls.update`) on the a-priori error
    `yc(t) - phi(t) theta`, each of the regression's two blocks (the g1 and the g2
    columns, disjoint in time) where it is active.
 
@@ -34,7 +34,7 @@ and their information are kept, the backlash restarts at its initial values (its
 approximation), and the full recursion starts. Only samples up to t ever enter the
 estimate at t: the whole procedure is on-line.
 
-**Forgetting** (`_online.forgetting`): the memory `1 / (1 - lam_k)` starts at
+**Forgetting** (`_rls.forgetting`): the memory `1 / (1 - lam_k)` starts at
 `memory0` samples and grows by `growth k + acceleration k^2` after k samples, up to
 `1 / (1 - lam)`. `lam = 1`: a factor that tends to 1, for a system that does not change;
 `lam < 1`: a constant memory, for tracking (and, noise-free, exact convergence: the
@@ -219,12 +219,12 @@ def recursive(
     - `orders`: static model orders.
     - `init`: initial values; default `initial_guess(orders, min(u), max(u))`.
     - `lam`, `memory0`, `growth`, `acceleration`: the forgetting schedule `lam_k =
-      min(lam, 1 - 1 / (memory0 + growth k + acceleration k^2))` (`_online.forgetting`),
+      min(lam, 1 - 1 / (memory0 + growth k + acceleration k^2))` (`_rls.forgetting`),
       k the samples since the first iteration.
     - `first_samples`: samples of the on-line first iteration (module docstring).
     - `anti_windup`: `"none"` (default: exponential forgetting, each block forgotten
       only where it is active, which already keeps the dead zone from winding `P` up),
-      `"trace"` or `"directional"` (`_online._rls`).
+      `"trace"` or `"directional"` (`_rls`).
     - `delta`: `P` starts (and restarts after the first iteration) at `delta I`.
     - `divergence_bound`: an estimate larger than this is `diverged`.
     - `every`: keep the estimate every `every` samples (0: only the final one).

@@ -202,7 +202,7 @@ class HysteresisTest(_Serialisable):
 
 
 def stop_outputs(u, thresholds) -> np.ndarray:
-    """Stop operators of `u` (`_hysteresis.stop_operators` in NumPy): `(N, K)`."""
+    """Stop operators of `u` (`_effects._operators.stop_operators` in NumPy): `(N, K)`."""
     u = np.asarray(u, dtype=np.float64)
     thresholds = np.asarray(thresholds, dtype=np.float64)
     out = np.empty((u.size, thresholds.size))
