@@ -32,4 +32,5 @@ def _release_compiled_code():
 
     _engine._EXECUTABLES.clear()
     _engine._compiled.cache_clear()
+    _engine._parts.cache_clear()
     jax.clear_caches()

@@ -89,13 +89,17 @@ def test_file_input_takes_random_segments_of_the_scaled_record(csv_record):
 
 
 def test_a_changed_file_changes_the_cell_identity(csv_record):
-    from jaxcascade._montecarlo._engine import cell_identity
+    from jaxcascade._montecarlo._engine import cell_identity, run_chunk
 
     path, values = csv_record
     spec = Spec(example=1, n=300, input="file", input_settings={"path": str(path), "column": "x"})
     before = cell_identity(spec, spec.cells()[0])
     pd.DataFrame({"time": np.arange(3000), "x": values[::-1]}).to_csv(path, index=False)
-    assert cell_identity(spec, spec.cells()[0]) != before
+    again = Spec(example=1, n=300, input="file", input_settings={"path": str(path), "column": "x"})
+    assert cell_identity(again, again.cells()[0]) != before
+    # the spec made before holds the old file's identity: it refuses to draw from the new
+    with pytest.raises(ValueError, match="changed since the spec was made"):
+        run_chunk(spec, spec.cells()[0], [0])
 
 
 @pytest.mark.parametrize(

@@ -436,8 +436,8 @@ def test_a_change_gives_other_records_and_the_tracking_columns(tmp_path, monkeyp
 
 def test_a_spec_changes_several_parameters_and_keeps_the_one_parameter_keys():
     from jaxcascade._montecarlo import _run
-    from jaxcascade._montecarlo._engine import _change_identity, cell_key
-    from jaxcascade._montecarlo._spec import Spec
+    from jaxcascade._montecarlo._engine import cell_key
+    from jaxcascade._montecarlo._spec import Spec, _change_identity
 
     # a one-parameter change keeps the identity it had before lists were allowed, so
     # its earlier sweeps resume

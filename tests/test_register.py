@@ -2,6 +2,7 @@
 an outside estimator of either kind (an `Estimator`, a host function) usable in sweeps,
 spec files, `fit` and `bench`; its sweep rows equal direct calls on the same records."""
 
+import dataclasses
 import importlib.util
 import json
 import pathlib
@@ -131,7 +132,7 @@ def test_host_function_failure_and_every_estimator_sees_the_same_records(registr
     jc.register_estimator("failing", failing)
     jc.register_estimator("mean_host", mean_host)
     spec = _spec("mean_host")
-    spec = Spec(**{**spec.__dict__, "estimators": ("mean_host", "failing"), "settings": {}})
+    spec = dataclasses.replace(spec, estimators=("mean_host", "failing"), settings={})
     table = run(spec, progress=False)
     failed = table[table["estimator"] == "failing"]
     assert (failed["status"] == "failed").all() and not failed["recovered"].any()

@@ -58,7 +58,6 @@ XLA's buffer sizes for a cell and chunk size.
 from __future__ import annotations
 
 import functools
-import hashlib
 import json
 import threading
 import time
@@ -70,83 +69,32 @@ import numpy as np
 import pandas as pd
 
 from .._compile import compiler_options
-from .._estimator import estimator, is_host
+from .._estimator import is_host
 from .._estimator._efficiency import crlb, noise_bound_options
 from .._estimator._normal_equations import resolve
-from .._experiment._changing import Change, simulate_changing, trajectory_traced
+from .._experiment._changing import simulate_changing, trajectory_traced
 from .._metrics import nrmse
 from .._system._model import CascadeParams, is_admissible
 from .._system._prior import random_system
 from .._system._simulate import add_noise, simulate
-from ._spec import Cell, Spec
+from ._spec import Cell, Spec, hash_words
 from ._tables import realisation_frame
 from ._tracking import tracking_samples
 
 
-def _hash_words(text: str) -> np.ndarray:
-    digest = hashlib.blake2b(text.encode(), digest_size=8).digest()
-    return np.frombuffer(digest, dtype="<u4")
-
-
 def cell_identity(spec: Spec, cell: Cell) -> str:
-    """What a cell's records depend on, as canonical text (floats in exact hex form)."""
-    if spec.family is not None:
-        system = {"family": spec.family}
-    else:
-        system = {
-            "values": {name: float(value).hex() for name, value in spec.true_values().items()}
-        }
-    identity = {
-        "orders": str(spec.orders),
-        **system,
-        "input": spec.input,
-        "amplitude": float(spec.amplitude).hex(),
-        "n": int(cell.n),
-        "snr": float(cell.snr).hex(),
-    }
-    if spec.input != "uniform":
-        identity["input_settings"] = _exact(spec.input_design().identity())
-    if spec.noise != "white":
-        identity["noise"] = spec.noise
-        identity["noise_settings"] = _exact(dict(spec.noise_settings))
-    if spec.change is not None:
-        identity["change"] = _change_identity(spec.change)
-    return json.dumps(identity, sort_keys=True)
-
-
-def _exact(value):
-    """Settings as canonical JSON values, floats in exact hex form."""
-    if isinstance(value, dict):
-        return {k: _exact(v) for k, v in sorted(value.items())}
-    if isinstance(value, list | tuple):
-        return [_exact(v) for v in value]
-    if isinstance(value, float):
-        return value.hex()
-    return value
-
-
-def _change_identity(change: Change) -> dict:
-    """A one-parameter change keeps the key it had before several could change."""
-    several = isinstance(change.parameter, tuple)
-    out = {"parameter": list(change.parameter) if several else change.parameter}
-    out["at"] = int(change.at)
-    for name in ("to", "drift"):
-        value = getattr(change, name)
-        if value is not None:
-            out[name] = [float(v).hex() for v in value] if several else float(value).hex()
-    return out
+    """What a cell's records depend on (`Spec.cell_identity`)."""
+    return spec.cell_identity(cell)
 
 
 def cell_key(spec: Spec, cell: Cell):
-    """`PRNGKey(seed)` folded with the 64-bit hash of `cell_identity` (two 32-bit words)."""
-    key = jax.random.PRNGKey(np.uint32(spec.seed))
-    for word in _hash_words(cell_identity(spec, cell)):
-        key = jax.random.fold_in(key, word)
-    return key
+    """The cell's key (`Spec.cell_key`): `PRNGKey(seed)` folded with the 64-bit hash of
+    its identity."""
+    return spec.cell_key(cell)
 
 
 def _system_tag(family: str) -> np.uint32:
-    return np.uint32(_hash_words(f"system:{family}")[0])
+    return np.uint32(hash_words(f"system:{family}")[0])
 
 
 def _draw(
@@ -312,22 +260,19 @@ def _split(design):
 
 
 @functools.lru_cache(maxsize=64)
-def _compiled(orders, n, experiment, name, settings, batched, family=None, change=None):
+def _compiled(orders, n, experiment, name, fit, batched, family=None, change=None):
     """The jitted (optionally vmapped) realisation function of one cell shape;
-    `experiment` is the spec's `_experiment` (input and noise, hashable)."""
-    spec_input, input_settings, spec_noise, noise_settings = experiment
-    from .._experiment._disturbance import disturbance
-    from .._experiment._inputs import input_design
-
-    design = input_design(spec_input, **dict(input_settings))
+    `experiment` is `Spec.experiment` (input and noise, hashable), `fit` the estimator
+    `name` with its settings (`Spec.fit`)."""
+    design, noise = _parts(experiment, str(jnp.result_type(float)))
     one = functools.partial(
         _realisation,
         orders=orders,
         n=n,
         design_static=_split(design)[1],
-        noise=disturbance(spec_noise, **dict(noise_settings)),
-        fit=estimator(name, **dict(settings)),
-        fit_key_tag=np.uint32(_hash_words(f"estimator:{name}")[0]),
+        noise=noise,
+        fit=fit,
+        fit_key_tag=np.uint32(hash_words(f"estimator:{name}")[0]),
         family=family,
         change=change,
     )
@@ -336,34 +281,37 @@ def _compiled(orders, n, experiment, name, settings, batched, family=None, chang
     return jax.jit(one, compiler_options=compiler_options())
 
 
-def _experiment(spec: Spec) -> tuple:
-    """The input design and noise of `spec` as a hashable tuple (a cache key)."""
-    return (
-        spec.input,
-        tuple(sorted(spec.input_settings.items())),
-        spec.noise,
-        tuple(sorted(spec.noise_settings.items())),
-    )
+@functools.lru_cache(maxsize=16)
+def _parts(experiment: tuple, dtype: str):
+    """The input design and the noise of `Spec.experiment`, built in the default float
+    `dtype` (a design's arrays are made in it). A file input rewritten since the spec
+    read it is refused: its records would not be those of the cell's identity."""
+    spec_input, input_settings, spec_noise, noise_settings, identity = experiment
+    from .._experiment._disturbance import disturbance
+    from .._experiment._inputs import input_design
+
+    design = input_design(spec_input, **dict(input_settings))
+    if json.dumps(design.identity(), sort_keys=True, default=str) != identity:
+        raise ValueError(
+            f"The {spec_input} input changed since the spec was made (its file was "
+            "rewritten): make the spec again to run on the new file."
+        )
+    return design, disturbance(spec_noise, **dict(noise_settings))
 
 
 def _arguments(spec: Spec, cell: Cell, dtype=None):
     dtype = dtype or jnp.result_type(float)
-    if spec.family is not None:  # drawn per realisation; only the shape and dtype matter
-        truth = jnp.zeros((len(spec.orders.names),), dtype)
-    else:
-        truth = spec.truth(dtype).to_vector()
-    arrays = _split(spec.input_design())[0]
-    return cell_key(spec, cell), truth, jnp.asarray(cell.snr, dtype), arrays
+    arrays = _split(_parts(spec.experiment, str(jnp.result_type(float)))[0])[0]
+    return spec.cell_key(cell), spec.true_vector(dtype), jnp.asarray(cell.snr, dtype), arrays
 
 
 def _function(spec: Spec, cell: Cell, batched: bool):
-    settings = spec.estimator_settings(cell.estimator)
     return _compiled(
         spec.orders,
         cell.n,
-        _experiment(spec),
+        spec.experiment,
         cell.estimator,
-        settings,
+        spec.fit(cell.estimator),
         batched,
         spec.family,
         spec.change,
@@ -385,9 +333,9 @@ def _executable(spec: Spec, cell: Cell, arguments) -> tuple:
     cache_key = (
         spec.orders,
         cell.n,
-        _experiment(spec),
+        spec.experiment,
         cell.estimator,
-        spec.estimator_settings(cell.estimator),
+        spec.fit(cell.estimator),
         spec.family,
         spec.change,
         indices.shape,
@@ -411,17 +359,13 @@ def _executable(spec: Spec, cell: Cell, arguments) -> tuple:
 def _host_programs(orders, n, experiment, family, change=None):
     """The batched draw and score of a cell shape whose estimator runs on the host (or
     whose records `records` returns)."""
-    spec_input, input_settings, spec_noise, noise_settings = experiment
-    from .._experiment._disturbance import disturbance
-    from .._experiment._inputs import input_design
-
-    design = input_design(spec_input, **dict(input_settings))
+    design, noise = _parts(experiment, str(jnp.result_type(float)))
     draw = functools.partial(
         _draw,
         orders=orders,
         n=n,
         design_static=_split(design)[1],
-        noise=disturbance(spec_noise, **dict(noise_settings)),
+        noise=noise,
         family=family,
         change=change,
     )
@@ -438,7 +382,7 @@ def _host_chunk(spec: Spec, cell: Cell, fit, indices: np.ndarray, size: int) -> 
     drawn and the estimates scored in compiled, batched calls (padded to `size`, so a
     cell compiles once), the fits run one record after another on the host, each timed
     (`fit_seconds` per row)."""
-    experiment = _experiment(spec)
+    experiment = spec.experiment
     draw, score = _host_programs(spec.orders, cell.n, experiment, spec.family, spec.change)
     padded = np.concatenate([indices, np.full(size - indices.size, indices[-1])])
     key, truth, snr, arrays = _arguments(spec, cell)
@@ -500,17 +444,12 @@ def _host_chunk(spec: Spec, cell: Cell, fit, indices: np.ndarray, size: int) -> 
     }
 
 
-def _fit(spec: Spec, cell: Cell):
-    """The cell's estimator with its settings."""
-    return estimator(cell.estimator, **dict(spec.estimator_settings(cell.estimator)))
-
-
 def records(spec: Spec, cell: Cell, indices) -> dict[str, np.ndarray]:
     """The records realisations `indices` of `cell` fit (`u`, `y`, one row each) and
     their validation records (`u_val`, `y_val`): the same for every estimator of a
     sweep, for checking a table's rows against direct fits."""
     indices = np.asarray(indices, np.int64)
-    draw, _ = _host_programs(spec.orders, cell.n, _experiment(spec), spec.family, spec.change)
+    draw, _ = _host_programs(spec.orders, cell.n, spec.experiment, spec.family, spec.change)
     key, truth, snr, arrays = _arguments(spec, cell)
     drawn = jax.device_get(draw(key, jnp.asarray(indices.astype(np.uint32)), truth, snr, arrays))
     return {name: np.asarray(drawn[name]) for name in ("u", "y", "u_val", "y_val")}
@@ -530,7 +469,7 @@ def run_chunk(spec: Spec, cell: Cell, indices) -> pd.DataFrame:
     if indices.min() < 0 or indices.max() >= 2**32:
         raise ValueError("Realisation indices must lie in [0, 2**32).")
     size = max(spec.chunk_size, indices.size)
-    fit = _fit(spec, cell)
+    fit = spec.fit(cell.estimator)
     if is_host(fit):
         outputs = _host_chunk(spec, cell, fit, indices, size)
         outputs["key"] = _key_to_uint64(outputs["key"])
@@ -562,8 +501,8 @@ def normal_equations_backend(spec: Spec, dtype=None) -> str:
 
 def run_realisation(spec: Spec, cell: Cell, index: int) -> dict:
     """One realisation without `vmap` (to rerun a table row, and the batching oracle)."""
-    if is_host(_fit(spec, cell)):
-        out = _host_chunk(spec, cell, _fit(spec, cell), np.asarray([index], np.int64), 1)
+    if is_host(spec.fit(cell.estimator)):
+        out = _host_chunk(spec, cell, spec.fit(cell.estimator), np.asarray([index], np.int64), 1)
         out["key"] = _key_to_uint64(out["key"])
         return {k: np.asarray(v)[0] if np.ndim(v) else np.asarray(v) for k, v in out.items()}
     key, truth, snr, arrays = _arguments(spec, cell)
@@ -584,8 +523,8 @@ def chunk_memory(spec: Spec, cell: Cell, chunk_size: int | None = None) -> dict[
     size = chunk_size or spec.chunk_size
     key, truth, snr, arrays = _arguments(spec, cell)
     indices = jnp.zeros((size,), jnp.uint32)
-    if is_host(_fit(spec, cell)):  # the compiled part is the draw (and the small score)
-        experiment = _experiment(spec)
+    if is_host(spec.fit(cell.estimator)):  # the compiled part is the draw (and the small score)
+        experiment = spec.experiment
         program = _host_programs(spec.orders, cell.n, experiment, spec.family, spec.change)[0]
     else:
         program = _function(spec, cell, batched=True)

@@ -19,7 +19,7 @@ import numpy as np
 import pandas as pd
 
 from .._estimator import is_host
-from ._engine import _fit, run_chunk
+from ._engine import run_chunk
 from ._spec import Spec
 from ._tables import read_metadata, run_metadata, write_table
 
@@ -199,7 +199,7 @@ def _results(spec: Spec, chunks: list, dtype):
         from ._distributed import distributed_chunks  # imports dask only when asked for
 
         return distributed_chunks(spec, chunks, dtype)
-    if spec.workers > 1 and not any(is_host(_fit(spec, cell)) for cell in spec.cells()):
+    if spec.workers > 1 and not any(is_host(spec.fit(cell.estimator)) for cell in spec.cells()):
         return _in_threads(spec, chunks, spec.workers)
     return ((cell, indices, run_chunk(spec, cell, indices)) for cell, indices in chunks)
 

@@ -53,6 +53,7 @@ TOML layout (every key optional except the system):
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
 import pathlib
 import tomllib
@@ -60,7 +61,9 @@ import warnings
 from collections.abc import Mapping
 from typing import Any, NamedTuple
 
+import jax
 import jax.numpy as jnp
+import numpy as np
 
 from .._estimator import estimator
 from .._experiment._changing import Change, trajectory
@@ -143,6 +146,35 @@ def _listed(table: Mapping[str, Any]) -> dict[str, Any]:
         return [plain(v) for v in value] if isinstance(value, tuple) else value
 
     return {key: plain(value) for key, value in table.items()}
+
+
+def hash_words(text: str) -> np.ndarray:
+    """The 64-bit BLAKE2b hash of `text` as two 32-bit words (keys are folded with them)."""
+    digest = hashlib.blake2b(text.encode(), digest_size=8).digest()
+    return np.frombuffer(digest, dtype="<u4")
+
+
+def _exact(value):
+    """Settings as canonical JSON values, floats in exact hex form."""
+    if isinstance(value, dict):
+        return {k: _exact(v) for k, v in sorted(value.items())}
+    if isinstance(value, list | tuple):
+        return [_exact(v) for v in value]
+    if isinstance(value, float):
+        return value.hex()
+    return value
+
+
+def _change_identity(change: Change) -> dict:
+    """A one-parameter change keeps the key it had before several could change."""
+    several = isinstance(change.parameter, tuple)
+    out = {"parameter": list(change.parameter) if several else change.parameter}
+    out["at"] = int(change.at)
+    for name in ("to", "drift"):
+        value = getattr(change, name)
+        if value is not None:
+            out[name] = [float(v).hex() for v in value] if several else float(value).hex()
+    return out
 
 
 @dataclasses.dataclass(frozen=True)
@@ -302,6 +334,16 @@ class Spec:
         self._warn_breakpoints(design)
         if self.change is not None:
             self._check_change()
+        # What a cell's identity and its fit need, resolved once here (plain values and
+        # estimators without arrays, the same in every dtype and on every Dask worker):
+        # the engine asks the spec instead of resolving them per chunk.
+        set_(self, "_input_identity", _exact(design.identity()))
+        set_(self, "_input_stamp", json.dumps(design.identity(), sort_keys=True, default=str))
+        set_(
+            self,
+            "_fits",
+            {name: estimator(name, **self.settings.get(name, {})) for name in self.estimators},
+        )
 
     def _check_change(self) -> None:
         change = self.change
@@ -414,6 +456,67 @@ class Spec:
                 f"The {self.family!r} family has no single true system: each realisation "
                 "draws its own (see the true_<name> columns of the realisation table)."
             )
+
+    def true_vector(self, dtype=None):
+        """The true parameters as one vector in `orders.names` order (zeros for a family:
+        each realisation draws its own, only the shape and dtype matter)."""
+        dtype = dtype or jnp.result_type(float)
+        if self.family is not None:
+            return jnp.zeros((len(self.orders.names),), dtype)
+        values = self.true_values()
+        return jnp.asarray([values[name] for name in self.orders.names], dtype)
+
+    @property
+    def experiment(self) -> tuple:
+        """The input design and noise as a hashable tuple (a cache key), with the input's
+        identity as the spec read it (a file input's SHA-256)."""
+        return (
+            self.input,
+            tuple(sorted(self.input_settings.items())),
+            self.noise,
+            tuple(sorted(self.noise_settings.items())),
+            self._input_stamp,
+        )
+
+    def fit(self, name: str):
+        """Estimator `name` of the spec with its settings."""
+        return self._fits[name]
+
+    def cell_identity(self, cell: Cell) -> str:
+        """What a cell's records depend on, as canonical text (floats in exact hex form):
+        the system, the input and its settings, the noise and its settings, a change,
+        N and the SNR. Not the estimator, the chunking or the scheduler: every estimator
+        of a sweep fits the same records, however the sweep runs."""
+        if self.family is not None:
+            system = {"family": self.family}
+        else:
+            system = {
+                "values": {name: float(value).hex() for name, value in self.true_values().items()}
+            }
+        identity = {
+            "orders": str(self.orders),
+            **system,
+            "input": self.input,
+            "amplitude": float(self.amplitude).hex(),
+            "n": int(cell.n),
+            "snr": float(cell.snr).hex(),
+        }
+        if self.input != "uniform":
+            identity["input_settings"] = self._input_identity
+        if self.noise != "white":
+            identity["noise"] = self.noise
+            identity["noise_settings"] = _exact(dict(self.noise_settings))
+        if self.change is not None:
+            identity["change"] = _change_identity(self.change)
+        return json.dumps(identity, sort_keys=True)
+
+    def cell_key(self, cell: Cell):
+        """`PRNGKey(seed)` folded with the 64-bit hash of `cell_identity` (two 32-bit
+        words): realisation `i` of the cell uses `fold_in(cell_key, i)`."""
+        key = jax.random.PRNGKey(np.uint32(self.seed))
+        for word in hash_words(self.cell_identity(cell)):
+            key = jax.random.fold_in(key, word)
+        return key
 
     def cells(self) -> list[Cell]:
         """Grid cells in table order: N outermost, then SNR, then estimator."""
