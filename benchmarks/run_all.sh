@@ -108,8 +108,8 @@ backlash() {  # issues 15 and 21 (needs ../shared/data): each hysteresis effect 
     python benchmarks/brfd_initial_state.py --data "${BRFD_DATA:-../shared/data/brfd}" --decimate 16 \
         --n 50,20,100 --effect backlash_friction --out results/brfd_backlash/initial_state.md
 }
-reproduce() {  # issue 2: the paper's examples
-    for ex in 1 2; do for snr in 25 inf; do for est in literal robust; do
+reproduce() {  # issue 2: the paper's examples; issue 39: the general backlash's
+    for ex in 1 2 general1 general2; do for snr in 25 inf; do for est in literal robust; do
         jaxcascade reproduce --example $ex --snr $snr --estimator $est --out results/reproduce \
             > /dev/null
     done; done; done

@@ -31,6 +31,7 @@ def _one_line_error(capsys, argv):
         (["reproduce", "--example", "1", "--snr", "abc"], "invalid float"),
         (["reproduce"], "required"),
         (["reproduce", "--example", "1", "--out", "/proc/forbidden"], "cannot write"),
+        (["reproduce", "--example", "general1", "--estimator", "pem"], "general-backlash"),
         (["nonsense"], "invalid choice"),
         (["fit", "missing.csv", "--input", "u", "--output", "y"], "does not exist"),
         (["fit", "x.csv", "--input", "u", "--output", "y", "--orders", "2,2"], "--orders"),
@@ -253,3 +254,22 @@ def test_loop_effects_option_names_the_library(capsys, tmp_path):
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert "--effects" in err and "no_such_effect" in err
+
+
+def test_reproduce_a_general_backlash_example(capsys, tmp_path):
+    # Issue 39, point 3: the note's examples through the same command, noise-free: the
+    # key-term iteration from the paper's initial values (curvature 0) reaches the truth
+    # of every parameter, the curvature terms included, and says converged.
+    argv = ["reproduce", "--example", "general2", "--snr", "inf", "--out", str(tmp_path)]
+    assert main([*argv, "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert result["example"] == "general2" and result["status"] == "converged"
+    assert {"mL_2", "mL_3", "mR_2", "mR_3"} <= set(result["true"])
+    assert result["true"]["mL_2"] == -0.03 and result["true"]["mR_3"] == 0.02
+    for name, value in result["true"].items():
+        assert abs(result["estimates"][name] - value) < 1e-6, name
+    stem = "general2_snrinf_seed0"
+    names = {p.name for p in tmp_path.iterdir()}
+    assert {f"{stem}_estimates.csv", f"{stem}_estimates.md", f"{stem}_convergence.png"} <= names
+    table = pd.read_csv(tmp_path / f"{stem}_estimates.csv")
+    assert list(table["parameter"])[-4:] == ["mL_2", "mL_3", "mR_2", "mR_3"]

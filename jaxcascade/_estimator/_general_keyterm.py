@@ -61,14 +61,17 @@ from ._regression import key_term_columns, solve_gram
 
 class KeyTermGeneral(eqx.Module):
     """Output of `key_term_general`: the estimate (cascade and general backlash), a
-    `Status` code, the steps taken (the first iteration counted) and the last step's
-    cost J (mean squared equation error)."""
+    `Status` code, the steps taken (the first iteration counted), the last step's
+    cost J (mean squared equation error) and the iterates (`history`: row 0 the paper's
+    initial values, row k iteration k, in theta order then the curvature terms; the
+    rows after `iterations` hold no iterate)."""
 
     params: CascadeParams
     backlash: GeneralBacklash
     status: Array
     iterations: Array
     cost: Float[Array, ""]
+    history: Float[Array, "K P"]  # theta (then curveL, curveR) at iterations 0..K-1
 
 
 def general_regression(params: CascadeParams, nd: GeneralBacklash, u, y):
@@ -144,14 +147,14 @@ def _iterate(u, y, orders: Orders, degree: int, max_iterations: int, settings):
     running = jnp.where(max_iterations <= 1, Status.max_iterations, _RUNNING)
     status = jnp.where(usable(theta), running, Status.diverged)
     start = (theta, history, singular, cost, jnp.asarray(1), status)
-    theta, _, singular, cost, k, status = jax.lax.while_loop(
+    theta, history, singular, cost, k, status = jax.lax.while_loop(
         lambda carry: carry[-1] == _RUNNING, step, start
     )
     # judged on the final estimate: from a rank-deficient regression the data do not
     # determine every parameter
     status = jnp.where((status != Status.diverged) & singular, Status.singular, status)
     params, nd = _unpack(theta, orders, degree)
-    return KeyTermGeneral(params, nd, status.astype(jnp.int32), k, cost)
+    return KeyTermGeneral(params, nd, status.astype(jnp.int32), k, cost, history)
 
 
 def key_term_general(
