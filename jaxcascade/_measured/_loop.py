@@ -66,6 +66,7 @@ from ._effects import (
     Start,
     backlash_of,
     plain,
+    simulate_padded,
     simulate_with_switches,
 )
 from ._initial_state import initialise
@@ -90,16 +91,8 @@ from ._significance import (
 # Compiled once per model structure and record-length bucket (`_compile.bucket_length`:
 # the loop simulates the same models on the same records many times, and a record of a
 # new length would otherwise compile a new program).
-_simulate_jit = filter_jit(simulate_with_switches)
 _parallel_jit = filter_jit(lambda effect, u: effect.parallel(u))
-
-
-def _simulate(model: ExtendedModel, u):
-    """`simulate_with_switches` of one record (host side): the input padded to its
-    length's bucket, the outputs cut back, NumPy arrays."""
-    u = np.asarray(u)
-    out = _simulate_jit(model, jnp.asarray(pad(u)))
-    return tuple(np.asarray(a)[: u.shape[0]] for a in out)
+_simulate = simulate_padded  # one record on the host, padded to its bucket (`_effects`)
 
 
 def simulated_output(model: ExtendedModel, u) -> np.ndarray:
@@ -239,7 +232,7 @@ def refit(model: ExtendedModel, start: Start, u, y, max_steps: int = 150):
     best = int(np.argmin(np.where(np.isfinite(costs), costs, np.inf)))
     # the best start's model, indexed on the host (an eager `leaf[best]` compiles a
     # program per leaf shape)
-    chosen = jax.tree_util.tree_map(lambda leaf: jnp.asarray(np.asarray(leaf)[best]), models)
+    chosen = jax.tree_util.tree_map(lambda leaf: jax.device_put(np.asarray(leaf)[best]), models)
     return chosen, float(costs[best]), int(np.asarray(status)[best])
 
 

@@ -44,6 +44,9 @@ from ._base import (
     simulate_extended as simulate_extended,
 )
 from ._base import (
+    simulate_padded as simulate_padded,
+)
+from ._base import (
     simulate_with_switches as simulate_with_switches,
 )
 from ._curved import (

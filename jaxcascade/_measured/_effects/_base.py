@@ -29,6 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from ..._compile import filter_jit, pad
 from ..._system._general_backlash import GeneralBacklash, general_signals
 from ..._system._model import CascadeParams, Orders
 from ..._system._simulate import signals
@@ -263,6 +264,21 @@ def simulate_with_switches(model: ExtendedModel, u):
         if path is not None:
             y = y + path
     return y, x, y_cascade
+
+
+# One compiled program per model structure and record-length bucket for every host-side
+# simulation of the loop (its scoring, the effects' starts): the same model simulated
+# by two callers is one program, not two.
+_simulate_jit = filter_jit(simulate_with_switches)
+
+
+def simulate_padded(model: ExtendedModel, u) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """`simulate_with_switches` of one record on the host: the input padded to its
+    length's bucket (`_compile.pad`), the outputs `(y, x, y_cascade)` cut back, NumPy
+    arrays."""
+    u = np.asarray(u)
+    out = _simulate_jit(model, jax.device_put(pad(u)))
+    return tuple(np.asarray(a)[: u.shape[0]] for a in out)
 
 
 class OutputOffset(Effect):

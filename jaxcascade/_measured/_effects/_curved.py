@@ -28,23 +28,17 @@ from __future__ import annotations
 
 from typing import ClassVar
 
-import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from ..._compile import filter_jit, pad
 from ..._system._general_backlash import GeneralBacklash, branch_report, general_switches
 from ..._system._model import CascadeParams
-from ._base import Effect, ExtendedModel, Start, _batched, _repeat, simulate_with_switches
-
-_switches = filter_jit(simulate_with_switches)
+from ._base import Effect, ExtendedModel, Start, _batched, _repeat, simulate_padded
 
 
 def _signals(model: ExtendedModel, u):
     """`(y, x, y_cascade)` of `model` on one record (host side, padded to its bucket)."""
-    u = np.asarray(u, float)
-    out = _switches(model, jnp.asarray(pad(u)))
-    return tuple(np.asarray(a)[: u.shape[0]] for a in out)
+    return simulate_padded(model, np.asarray(u, float))
 
 
 class CurvedBacklash(Effect):

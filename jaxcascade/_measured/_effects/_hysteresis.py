@@ -55,7 +55,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from ..._compile import filter_jit, jit, pack, pad
+from ..._compile import jit, pack, pad
 from ._base import (
     Effect,
     EffectState,
@@ -64,7 +64,7 @@ from ._base import (
     _batched,
     _repeat,
     recent,
-    simulate_extended,
+    simulate_padded,
 )
 from ._operators import (
     backlash_friction,
@@ -515,13 +515,9 @@ class DahlFriction(_LinearPath):
         return effect, f"{cls.name}:travel={fraction:g}span"
 
 
-_simulate_extended = filter_jit(simulate_extended)
-
-
 def _simulate_padded(model, u) -> np.ndarray:
     """`simulate_extended` of one record on the host, padded like `_stops`."""
-    n = np.shape(u)[0]
-    return np.asarray(_simulate_extended(model, jnp.asarray(pad(np.asarray(u)))))[:n]
+    return simulate_padded(model, u)[0]
 
 
 class InputBacklash(Effect):
