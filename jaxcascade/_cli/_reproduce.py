@@ -185,24 +185,27 @@ def _reproduce_general(args, out: pathlib.Path) -> int:
         names = list(truth)
         plot_iterates(history, names, blocks, truth, title, out / f"{tag}_convergence.png")
         written.append("convergence.png")
-    if args.json:
-        print(
-            strict_json(
-                {
-                    "example": ex.name,
-                    "iterations": iterations,
-                    "status": status,
-                    "message": Status[status].message,
-                    "estimates": estimates,
-                    "true": truth,
-                }
-            )
-        )
+    summary = {"example": ex.name, "iterations": iterations, "status": status}
+    return _print(
+        args, summary | {"estimates": estimates, "true": truth}, title, table, out / tag, written
+    )
+
+
+def _print(args, summary: dict, title: str, table, stem, written) -> int:
+    """The command's answer: `summary` as JSON (with the status's message), or the
+    title, the status, the table and the files written."""
+    from .._status import Status
+
+    message = Status[summary["status"]].message
+    if args.json:  # the message right after the status, as before
+        keys = list(summary)
+        keys.insert(keys.index("status") + 1, "message")
+        print(strict_json({k: message if k == "message" else summary[k] for k in keys}))
     else:
         print(title)
-        print(f"{status}: {Status[status].message}")
+        print(f"{summary['status']}: {message}")
         print(table.to_string(index=False, float_format=lambda v: f"{v: .6f}"))
-        print(f"written: {out / tag}_{{{','.join(written)}}}")
+        print(f"written: {stem}_{{{','.join(written)}}}")
     return 0
 
 
@@ -258,27 +261,17 @@ def reproduce(args) -> int:
     (out / f"{tag}_estimates.md").write_text(_markdown(table, header))
     plot_trajectories(solution, truth, title, out / f"{tag}_convergence.png")
 
-    if args.json:
-        print(
-            strict_json(
-                {
-                    "example": ex.number,
-                    "iterations": iterations,
-                    "status": status,
-                    "message": Status[status].message,
-                    "settings": used,
-                    "cycle_amplitude": float(solution.cycle_amplitude),
-                    "estimates": solution.params.to_dict(),
-                    "true": truth,
-                }
-            )
-        )
-    else:
-        print(title)
-        print(f"{status}: {Status[status].message}")
-        print(table.to_string(index=False, float_format=lambda v: f"{v: .6f}"))
-        print(f"written: {out / tag}_{{estimates.csv,estimates.md,convergence.png}}")
-    return 0
+    summary = {
+        "example": ex.number,
+        "iterations": iterations,
+        "status": status,
+        "settings": used,
+        "cycle_amplitude": float(solution.cycle_amplitude),
+        "estimates": solution.params.to_dict(),
+        "true": truth,
+    }
+    written = ["estimates.csv", "estimates.md", "convergence.png"]
+    return _print(args, summary, title, table, out / tag, written)
 
 
 def _example_number(text: str) -> int | str:
