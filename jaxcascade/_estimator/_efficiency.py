@@ -39,6 +39,11 @@ sigma_w^2` (`information_factor`: Student-t with `nu` degrees of freedom `nu (nu
 ((nu - 2)(nu + 3))`, 2 at `nu = 3`), so its bound on a standard deviation is
 `crlb / sqrt(information_factor)`. Sweep tables report the Gaussian (second-order) one.
 
+**A general output backlash** (`backlash=`, `_general_backlash`): theta continues with
+the branches' curvature terms (`curveL`, then `curveR`) after the cascade's parameters,
+whose `cL`, `mR`, `cR` are the curved block's; the same output-error information through
+the simulator with curved branches.
+
 **Measured records** (`standard_errors`): the same information at the estimate, with
 `sigma^2` estimated from the residual (`sum r^2 / (N - P)`), and, when a noise model
 whitens the residual, the whitened Jacobian (generalised least squares): the estimated
@@ -56,33 +61,62 @@ from jaxtyping import Array, Float
 
 from .. import _linalg
 from .._experiment._noise_filter import coefficients, variance_ratio, whiten
+from .._system._general_backlash import GeneralBacklash, general_signals
 from .._system._model import CascadeParams
 from .._system._simulate import simulate
 
 
-def jacobian(params: CascadeParams, u: Float[Array, " T"]) -> Float[Array, "T P"]:
-    """`d simulate(params, u) / d theta` (theta in `Orders.names` order), by forward-mode
-    differentiation through the simulator (all P tangents in one pass)."""
+def _parameterised(params: CascadeParams, backlash: GeneralBacklash | None, dtype):
+    """`(theta, simulate_theta)`: the parameter vector (`Orders.names` order, then a
+    general backlash's `curveL` and `curveR`) and the noise-free output as a function
+    `simulate_theta(theta, u)`.
+    With `backlash`, `params`' `cL`, `mR`, `cR` are the backlash's (as in
+    `_general_refine`'s fits) and only its curvature is taken from it."""
     orders = params.orders
-    vector = params.to_vector().astype(u.dtype)
-    return jax.jacfwd(lambda v: simulate(CascadeParams.from_vector(v, orders, check=False), u))(
-        vector
+    vector = params.to_vector().astype(dtype)
+    if backlash is None:
+        return vector, lambda v, u: simulate(CascadeParams.from_vector(v, orders, check=False), u)
+    size, q1 = orders.size, backlash.degree - 1
+    theta = jnp.concatenate(
+        [vector, jnp.asarray(backlash.curveL, dtype), jnp.asarray(backlash.curveR, dtype)]
     )
 
+    def simulate_theta(v, u):
+        p = CascadeParams.from_vector(v[:size], orders, check=False)
+        curved = GeneralBacklash.unchecked(
+            p.cL, p.mR, p.cR, v[size : size + q1], v[size + q1 : size + 2 * q1]
+        )
+        return general_signals(p, curved, u).y
 
-def _sigma(params, u, snr, sigma):
+    return theta, simulate_theta
+
+
+def jacobian(
+    params: CascadeParams, u: Float[Array, " T"], backlash: GeneralBacklash | None = None
+) -> Float[Array, "T P"]:
+    """`d simulate(params, u) / d theta` (theta in `Orders.names` order; with a general
+    `backlash`, its `curveL` and `curveR` follow), by forward-mode differentiation
+    through the simulator (all P tangents in one pass)."""
+    theta, simulate_theta = _parameterised(params, backlash, u.dtype)
+    return jax.jacfwd(lambda v: simulate_theta(v, u))(theta)
+
+
+def _sigma(params, u, snr, sigma, backlash=None):
     if (snr is None) == (sigma is None):
         raise ValueError("Give the noise level as exactly one of snr or sigma.")
     if sigma is not None:
         return jnp.asarray(sigma, u.dtype)
     # the paper's SNR is an amplitude ratio to the noise-free output (as `add_noise`)
-    return jnp.std(simulate(params, u)) / jnp.asarray(snr, u.dtype)
+    if backlash is None:
+        return jnp.std(simulate(params, u)) / jnp.asarray(snr, u.dtype)
+    theta, simulate_theta = _parameterised(params, backlash, u.dtype)
+    return jnp.std(simulate_theta(theta, u)) / jnp.asarray(snr, u.dtype)
 
 
-def _whitened(params, u, snr, sigma, poles, zeros):
+def _whitened(params, u, snr, sigma, poles, zeros, backlash=None):
     """The whitened Jacobian `J_w` and the innovations' standard deviation `sigma_w`."""
-    J = jacobian(params, u)
-    sigma = _sigma(params, u, snr, sigma)
+    J = jacobian(params, u, backlash)
+    sigma = _sigma(params, u, snr, sigma, backlash)
     if not len(poles) and not len(zeros):
         return J, sigma
     c, d = coefficients(tuple(poles), tuple(zeros))
@@ -98,17 +132,20 @@ def fisher_information(
     sigma=None,
     poles=(),
     zeros=(),
+    backlash: GeneralBacklash | None = None,
 ) -> Float[Array, "P P"]:
     """Fisher information `J_w^T J_w / sigma_w^2` of theta for the record(s) `u`; a batch
     of records (leading axis) gives their average information. The noise level is
     `sigma`, or `std(simulate(params, u)) / snr` (the paper's amplitude SNR), the
     standard deviation of the noise as added; `poles` and `zeros` (real numbers or
     `[radius, angle]` pairs, `_noise_filter.roots`; poles inside the unit circle) make it
-    coloured (module docstring); none: white."""
-    options = dict(snr=snr, sigma=sigma, poles=poles, zeros=zeros)
+    coloured (module docstring); none: white. `backlash`: a general backlash
+    (`_general_backlash`) in place of the straight one, whose curvature terms follow the
+    cascade's parameters in theta."""
+    options = dict(snr=snr, sigma=sigma, poles=poles, zeros=zeros, backlash=backlash)
     if u.ndim == 2:
         return jnp.mean(jax.vmap(lambda one: fisher_information(params, one, **options))(u), 0)
-    J, sigma_w = _whitened(params, u, snr, sigma, poles, zeros)
+    J, sigma_w = _whitened(params, u, snr, sigma, poles, zeros, backlash)
     return J.T @ J / sigma_w**2
 
 
@@ -120,18 +157,21 @@ def crlb(
     sigma=None,
     poles=(),
     zeros=(),
+    backlash: GeneralBacklash | None = None,
 ):
     """The Cramér-Rao bound on the standard deviation of every parameter (`Orders.names`
     order) for record `u`; with a batch of records, the average of the per-record bounds
     (module docstring). `inf` for a parameter the record does not determine (singular
     information, e.g. a segment never visited), 0 noise-free. Coloured noise: `poles`,
     `zeros` of `e = C(q)/A(q) w` (`fisher_information`); heavy tails: the Gaussian
-    bound of the same variance (module docstring, `information_factor`). Traceable."""
-    options = dict(snr=snr, sigma=sigma, poles=poles, zeros=zeros)
+    bound of the same variance (module docstring, `information_factor`); `backlash`: the
+    general backlash's model, its curvature terms after the cascade's (`jacobian`).
+    Traceable."""
+    options = dict(snr=snr, sigma=sigma, poles=poles, zeros=zeros, backlash=backlash)
     if u.ndim == 2:
         variances = jax.vmap(lambda one: crlb(params, one, **options) ** 2)(u)
         return jnp.sqrt(jnp.mean(variances, 0))
-    return _bound(*_whitened(params, u, snr, sigma, poles, zeros))
+    return _bound(*_whitened(params, u, snr, sigma, poles, zeros, backlash))
 
 
 def noise_bound_options(noise=None) -> dict:

@@ -47,13 +47,11 @@ def _output(params: CascadeParams, nd: GeneralBacklash, u):
     return general_backlash(nd, x), x
 
 
-@filter_jit
-def _refine(init: CascadeParams, nd: GeneralBacklash, u, y, max_steps: int, rtol, atol):
-    orders = init.orders
-    size = orders.size
-    q1 = nd.degree - 1
+def packed(init: CascadeParams, nd: GeneralBacklash, u) -> Array:
+    """The unconstrained vector of a cascade with a general backlash on the input `u`'s
+    range: the cascade's (`_refine.to_unconstrained`), then `curveL` and `curveR`."""
     u_min, u_max = jnp.min(u), jnp.max(u)
-    z0 = jnp.concatenate(
+    return jnp.concatenate(
         [
             to_unconstrained(init.astype(u.dtype), u_min, u_max),
             jnp.asarray(nd.curveL, u.dtype),
@@ -61,21 +59,34 @@ def _refine(init: CascadeParams, nd: GeneralBacklash, u, y, max_steps: int, rtol
         ]
     )
 
-    def unpack(z):
-        params = from_unconstrained(z[:size], orders, u_min, u_max)
-        curved = GeneralBacklash(
-            params.cL, params.mR, params.cR, z[size : size + q1], z[size + q1 :]
-        )
-        return params, curved
+
+def unpack(z, orders, degree: int, u):
+    """`(params, backlash)` of the first `orders.size + 2 (degree - 1)` elements of the
+    unconstrained vector `z` (`packed`'s inverse)."""
+    size, q1 = orders.size, degree - 1
+    params = from_unconstrained(z[:size], orders, jnp.min(u), jnp.max(u))
+    curved = GeneralBacklash(
+        params.cL, params.mR, params.cR, z[size : size + q1], z[size + q1 : size + 2 * q1]
+    )
+    return params, curved
+
+
+@filter_jit
+def _refine(init: CascadeParams, nd: GeneralBacklash, u, y, max_steps: int, rtol, atol):
+    orders, degree = init.orders, nd.degree
+    z0 = packed(init, nd, u)
+
+    def unpack_(z):
+        return unpack(z, orders, degree, u)
 
     def residual(z, args):
-        params, curved = unpack(z)
+        params, curved = unpack_(z)
         return _output(params, curved, u)[0] - y
 
     z, cost, status, steps = least_squares(
         residual, z0, None, max_steps=max_steps, rtol=rtol, atol=atol
     )
-    params, curved = unpack(z)
+    params, curved = unpack_(z)
     return params, curved, cost, status, steps, _output(params, curved, u)[1]
 
 
