@@ -133,3 +133,35 @@ def test_the_loop_adds_curved_branches_where_the_record_has_them():
     curved = backlash_of(result.final)
     assert curved is not None and curved.degree in (2, 3)
     assert result.final.structure().endswith(f"general_backlash({curved.degree}) -> y")
+
+
+def test_an_inadmissible_best_start_gives_way_to_the_next_admissible_one(monkeypatch):
+    # `_fit_candidate` takes, per candidate structure, the start of lowest cost whose fit
+    # is a backlash on the records; before, an inadmissible best start dropped the whole
+    # structure. The refit is stubbed: start 0 costs least and its left branch turns,
+    # start 1 is admissible, start 2 costs most.
+    from jaxcascade._measured import _loop
+    from jaxcascade._measured._effects import Start
+
+    ex, model = _curved("general1")
+    u = np.asarray(_record(600))
+    y = np.asarray(simulate(model, u)[0])
+    good, turning = (
+        model.effects[0],
+        CurvedBacklash(jnp.asarray([0.0, -0.5]), jnp.asarray([0.0, 0.05])),
+    )
+    fits = [model.with_(effects=(e,)) for e in (turning, good, turning)]
+    batch = jax.tree_util.tree_map(lambda *leaves: jnp.stack(leaves), *fits)
+    costs = np.array([1.0, 2.0, 3.0])
+    start = Start("general_backlash:3", ex.orders, np.zeros((3, ex.orders.size)), good)
+    monkeypatch.setattr(CurvedBacklash, "starts_records", classmethod(lambda cls, m, r: [start]))
+    monkeypatch.setattr(
+        _loop, "refit_all", lambda *a, **k: (batch, costs, np.zeros(3, int), np.argsort(costs))
+    )
+    base = model.with_(effects=())
+    fitted, label = _loop._fit_candidate("general_backlash", base, [u], [y], [(u, y, y)])
+    assert label == "general_backlash:3"
+    np.testing.assert_array_equal(np.asarray(fitted.effects[0].curveL), np.asarray(good.curveL))
+    # every start inadmissible: no fit of this kind
+    batch = jax.tree_util.tree_map(lambda *leaves: jnp.stack(leaves), *[fits[0]] * 3)
+    assert _loop._fit_candidate("general_backlash", base, [u], [y], [(u, y, y)]) is None

@@ -216,10 +216,12 @@ def _refit(
     return eqx.filter_vmap(one)(vectors, new)
 
 
-def refit(model: ExtendedModel, start: Start, u, y, max_steps: int = 150):
-    """Add `start.effect` to `model` from the starts `start`; the best start wins (host
-    side). `u`, `y`: one record, or sequences of records fitted jointly. Returns
-    `(model, cost, status)`."""
+def refit_all(model: ExtendedModel, start: Start, u, y, max_steps: int = 150):
+    """Add `start.effect` to `model` from each of the starts `start`. `u`, `y`: one
+    record, or sequences of records fitted jointly. Returns `(models, costs, status)`
+    batched over the starts, `costs` on the host with `inf` where not finite, and the
+    starts' indices from the lowest cost up (`order`, stable: the first of equal
+    costs first) as a fourth element."""
     us, ys = _records(u, y)
     groups = pack(us, ys)
     dtype = groups[0][0].dtype
@@ -229,11 +231,23 @@ def refit(model: ExtendedModel, start: Start, u, y, max_steps: int = 150):
         jnp.asarray(start.vectors, dtype), effect, model, groups, start.orders, max_steps, bounds
     )
     costs = np.asarray(costs)
-    best = int(np.argmin(np.where(np.isfinite(costs), costs, np.inf)))
-    # the best start's model, indexed on the host (an eager `leaf[best]` compiles a
-    # program per leaf shape)
-    chosen = jax.tree_util.tree_map(lambda leaf: jax.device_put(np.asarray(leaf)[best]), models)
-    return chosen, float(costs[best]), int(np.asarray(status)[best])
+    costs = np.where(np.isfinite(costs), costs, np.inf)
+    return models, costs, np.asarray(status), np.argsort(costs, kind="stable")
+
+
+def one_start(models, index: int):
+    """Start `index`'s model of `refit_all`'s batch, indexed on the host (an eager
+    `leaf[index]` compiles a program per leaf shape)."""
+    return jax.tree_util.tree_map(lambda leaf: jax.device_put(np.asarray(leaf)[index]), models)
+
+
+def refit(model: ExtendedModel, start: Start, u, y, max_steps: int = 150):
+    """Add `start.effect` to `model` from the starts `start`; the best start wins (host
+    side). `u`, `y`: one record, or sequences of records fitted jointly. Returns
+    `(model, cost, status)`."""
+    models, costs, status, order = refit_all(model, start, u, y, max_steps)
+    best = int(order[0])
+    return one_start(models, best), float(costs[best]), int(status[best])
 
 
 def fit_parallel(model: ExtendedModel, effect_class, u, y, alternations: int = 1):
@@ -959,9 +973,16 @@ def _fit_candidate(name, model, us, ys, records, action="add"):
     best = None
     samples = sum(np.shape(u)[0] for u in us)
     for start in effect.starts_records(model, records):
-        fitted, cost, _ = refit(model, start, us, ys, effect.refine_steps)
-        if fitted.effects and fitted.effects[-1].admissible(fitted, us) is not None:
-            continue  # not a model of its kind on these records (a branch that turns)
+        models, costs, _, order = refit_all(model, start, us, ys, effect.refine_steps)
+        # the start of lowest cost whose fit is a model of its kind on these records (not
+        # a curved backlash whose branch turns: `Effect.admissible`); none: the next
+        # structure
+        for index in order:
+            fitted, cost = one_start(models, int(index)), float(costs[index])
+            if not fitted.effects or fitted.effects[-1].admissible(fitted, us) is None:
+                break
+        else:
+            continue
         # Starts of one effect with more parameters (a higher branch degree) win only
         # where they lower the cost by more than their parameters are worth (BIC); among
         # starts of one size this is the smallest cost.
