@@ -154,8 +154,11 @@ general() {  # issue 39: the general-backlash examples' branches on their record
     # output-error estimate and the key-term iteration, noise-free and under noise; the
     # loop's effect
     python benchmarks/general_backlash.py --seed 0 --records 20 --out results/general_backlash
-    python benchmarks/general_backlash_study.py --records 50 --snr 25 --seed 0 \
-        --out results/general_backlash/study
+    # the estimators over SNR and N under white noise, and under AR(1) noise at one cell
+    python benchmarks/general_backlash_study.py --examples general1,general2 --snr 10,25,50 \
+        --n 1000,4000 --records 50 --seed 0 --out results/general_backlash/study
+    python benchmarks/general_backlash_study.py --examples general1,general2 --snr 25 \
+        --n 4000 --noise ar:0.8 --records 50 --seed 0 --out results/general_backlash/study_coloured
     # the loop's general_backlash effect on curved and straight records
     python benchmarks/general_backlash_loop.py --seeds 10 --out results/general_backlash/loop
 }
