@@ -163,8 +163,13 @@ general() {  # issue 39: the general-backlash examples' branches on their record
     python benchmarks/general_backlash_loop.py --seeds 10 --out results/general_backlash/loop
 }
 
+slow_tests() {  # issue 40: the slow test set, run and recorded per test (its tests of the shared
+    # records, the benchmarks and the damper, skip where ../shared/data is missing)
+    python benchmarks/slow_tests.py --out results/slow_tests
+}
 all=(bench profile bench_robust speed distributed robust sweeps literal efficiency effects_loop loop
-    stability backlash reproduce recursive inputs noise nonlinear statuses general general_brfd)
+    stability backlash reproduce recursive inputs noise nonlinear statuses general general_brfd
+    slow_tests)
 needs() {  # whether step $1 reads ../shared/data
     local s
     for s in "${needs_shared_data[@]}"; do [ "$s" = "$1" ] && return 0; done
