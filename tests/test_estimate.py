@@ -24,6 +24,10 @@ from jaxcascade import (
 from jaxcascade._estimator import _literal
 from jaxcascade._estimator._literal import voros_step
 
+# compiled: called eagerly, every `lax.scan` inside compiles a program of its own at
+# every call
+_voros_step = eqx.filter_jit(voros_step)
+
 
 def _example1_record(seed=0, n=None):
     ex = example(1)
@@ -42,7 +46,7 @@ def test_truth_is_a_fixed_point(orders):
     for _ in range(2):
         vector, (_, _, y) = oracle.identifiable_system(rng, orders, u)
         params = CascadeParams.from_vector(jnp.asarray(vector), orders)
-        new, singular, cost, _ = voros_step(params, jnp.asarray(u), jnp.asarray(y))
+        new, singular, cost, _ = _voros_step(params, jnp.asarray(u), jnp.asarray(y))
         assert not bool(singular)
         # zero-residual least squares, scaled condition number < 1e4: error ~1e4 eps
         np.testing.assert_allclose(new, vector, rtol=0, atol=1e-10)
@@ -177,7 +181,7 @@ def test_statistical_tolerance_stops_at_the_precision():
     sol = jaxcascade.voros(u, y, ex.orders, init)
     assert sol.status == Status.converged
     k = int(sol.iterations)
-    _, _, _, se = voros_step(
+    _, _, _, se = _voros_step(
         CascadeParams.from_vector(sol.history[k - 1], ex.orders, check=False), u, y
     )
     assert np.all(np.asarray(se) > 1e-4)  # the statistical precision at SNR 25, N 4000

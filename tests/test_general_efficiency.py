@@ -3,6 +3,7 @@
 finite-difference Jacobian of the simulator; `pem_general` finds the AR noise model of
 coloured noise, is output error where the noise is white, and never raises."""
 
+import equinox as eqx
 import jax
 import numpy as np
 import pytest
@@ -19,6 +20,11 @@ from jaxcascade._system._general_backlash import (
 )
 from jaxcascade._system._simulate import add_noise
 
+# compiled: called eagerly, every `lax.scan` inside compiles a program of its own at
+# every call
+_crlb = eqx.filter_jit(crlb)
+_fisher_information = eqx.filter_jit(fisher_information)
+
 
 def _input(n, seed=0, amplitude=2.0):
     return jc.uniform_input(jax.random.PRNGKey(seed), n, amplitude)
@@ -33,8 +39,8 @@ def test_degree_one_bound_is_todays(number):
         # the same simulation bit for bit; its derivatives through the general block's
         # (empty) curvature sums agree to rounding (1.4e-15 relative observed)
         np.testing.assert_allclose(
-            np.asarray(crlb(params, u, backlash=straight, **options)),
-            np.asarray(crlb(params, u, **options)),
+            np.asarray(_crlb(params, u, backlash=straight, **options)),
+            np.asarray(_crlb(params, u, **options)),
             rtol=1e-12,
         )
 
@@ -65,10 +71,10 @@ def test_curved_bound_is_the_finite_difference_jacobians():
     )
     sigma = 0.05
     expected = sigma * np.sqrt(np.diag(np.linalg.inv(J.T @ J)))
-    bound = np.asarray(crlb(params, u, sigma=sigma, backlash=nd))
+    bound = np.asarray(_crlb(params, u, sigma=sigma, backlash=nd))
     assert bound.shape == (orders.size + 2 * q1,)
     np.testing.assert_allclose(bound, expected, rtol=1e-5)
-    information = np.asarray(fisher_information(params, u, sigma=sigma, backlash=nd))
+    information = np.asarray(_fisher_information(params, u, sigma=sigma, backlash=nd))
     np.testing.assert_allclose(information, J.T @ J / sigma**2, rtol=1e-5, atol=1e-6)
 
 
@@ -87,7 +93,7 @@ def test_pem_general_finds_the_ar_noise_and_beats_output_error():
     assert int(fit.status) == jc.Status.converged and fit.increasing
     assert fit.c.shape == (1,) and abs(float(fit.c[0]) - 0.8) < 0.05
     truth = np.concatenate([params.to_vector(), nd.curveL, nd.curveR])
-    bound = np.asarray(crlb(params, u, snr=25.0, poles=(0.8,), backlash=nd))
+    bound = np.asarray(_crlb(params, u, snr=25.0, poles=(0.8,), backlash=nd))
 
     def error(f):  # the estimate's distance from the truth in units of the bound
         vector = np.concatenate([f.params.to_vector(), f.backlash.curveL, f.backlash.curveR])

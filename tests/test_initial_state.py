@@ -38,6 +38,11 @@ from jaxcascade._measured._initial_state import (
 from jaxcascade._measured._noise import ARNoise
 from jaxcascade._system._examples import example
 
+# compiled once per model structure: called eagerly, every `lax.scan` in them compiles
+# a program of its own at every call
+_simulate_from = eqx.filter_jit(simulate_from)
+_simulate_with_switches = eqx.filter_jit(simulate_with_switches)
+
 
 def _a(*values):
     return tuple(jnp.asarray(v) for v in values)
@@ -84,16 +89,16 @@ def test_every_effect_has_an_instance_here():
 def test_from_rest_is_the_package_simulation_and_a_state_continues_it(name):
     model = _model() if name is None else _model(INSTANCES[name])
     u = _input(300, seed=1)
-    expected = simulate_with_switches(model, u)
-    got = simulate_from(model, u, rest_state(model, u))
+    expected = _simulate_with_switches(model, u)
+    got = _simulate_from(model, u, rest_state(model, u))
     # the same arithmetic but for the order of a few additions (the poles' forcing)
     for a, b in zip(expected, got[:3], strict=True):
         np.testing.assert_allclose(b, a, rtol=1e-12, atol=1e-12)
     # the state read before sample k (inside a padded record: `at`) continues the record
     k = 137
     padded = jnp.concatenate([u, jnp.full((50,), u[-1])])
-    state = simulate_from(model, padded, rest_state(model, padded), jnp.asarray(k))[3]
-    tail = simulate_from(model, u[k:], state)[0]
+    state = _simulate_from(model, padded, rest_state(model, padded), jnp.asarray(k))[3]
+    tail = _simulate_from(model, u[k:], state)[0]
     np.testing.assert_allclose(tail, expected[0][k:], rtol=1e-10, atol=1e-10)
 
 
@@ -121,7 +126,7 @@ def _non_rest(model, u):
     record's start: the backlash and the operators against their upper side)."""
     prefix = jnp.concatenate([jnp.linspace(0.0, 1.5, 100), jnp.linspace(1.5, float(u[0]), 100)])
     joined = jnp.concatenate([prefix, u])
-    return simulate_from(model, joined, rest_state(model, joined))[0][200:]
+    return _simulate_from(model, joined, rest_state(model, joined))[0][200:]
 
 
 @pytest.mark.parametrize(
@@ -150,7 +155,7 @@ def test_initialise_recovers_a_state_other_than_rest(effects):
     np.testing.assert_allclose(fit.y[start:], np.asarray(y)[start:], atol=1e-4 * span)
     assert result.error < 1e-4
     # the parameters are the model's: the output is the model simulated from the state
-    replay = simulate_from(model, u, fit.state)[0]
+    replay = _simulate_from(model, u, fit.state)[0]
     np.testing.assert_allclose(fit.y, replay, atol=1e-12 * span)
 
 
@@ -172,7 +177,7 @@ def test_initialise_inside_a_record_keeps_the_noise_past():
 def test_start_below_n_is_raised_to_n():
     model = _model()
     u = _input(120)
-    fit = initialise(model, u, simulate_from(model, u, rest_state(model, u))[0], 10, 30)
+    fit = initialise(model, u, _simulate_from(model, u, rest_state(model, u))[0], 10, 30)
     assert (fit.first, fit.start) == (0, 30)
 
 
@@ -188,11 +193,11 @@ def test_compilation_is_bounded_by_structure_and_bucket(monkeypatch):
     assert len({bucket(t) for t in lengths}) == 1
     for T, start in zip(lengths, (60, 120, 250), strict=True):
         u = _input(T, seed=T)
-        y = simulate_from(model, u, rest_state(model, u))[0]
+        y = _simulate_from(model, u, rest_state(model, u))[0]
         scored(model, u, y, start, grid=(0.0, 1.0), max_steps=20)
     # another model of the same structure (other values) reuses it
     other = eqx.tree_at(lambda m: m.effects[0].sigma, model, jnp.asarray(2.0))
     u = _input(lengths[0])
-    y = simulate_from(other, u, rest_state(other, u))[0]
+    y = _simulate_from(other, u, rest_state(other, u))[0]
     scored(other, u, y, 80, grid=(0.0, 1.0), max_steps=20)
     assert eqx.debug.get_num_traces(counted) == 1

@@ -1,5 +1,6 @@
 """The normal equations of a step: the fused native kernel against the XLA reference."""
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -11,6 +12,11 @@ from jaxcascade import CascadeParams, Orders, Status, example, initial_guess, me
 from jaxcascade._estimator import _fused
 from jaxcascade._estimator._literal import voros_step
 from jaxcascade._estimator._normal_equations import normal_equations, resolve
+
+# compiled: called eagerly, every `lax.scan` inside compiles a program of its own at
+# every call
+_normal_equations = eqx.filter_jit(normal_equations)
+_voros_step = eqx.filter_jit(voros_step)
 
 fused = pytest.mark.skipif(not _fused.available(), reason=f"no fused kernel: {_fused.reason()}")
 
@@ -37,8 +43,8 @@ def _relative(a, b):
 @pytest.mark.parametrize("first", [False, True], ids=["full-step", "first-step"])
 def test_fused_equals_xla(orders, first):
     params, u, y = _record(orders, seed=orders.size)
-    want = normal_equations(params, u, y, first=first, backend="xla")
-    got = normal_equations(params, u, y, first=first, backend="fused")
+    want = _normal_equations(params, u, y, first=first, backend="xla")
+    got = _normal_equations(params, u, y, first=first, backend="fused")
     for a, b in zip(want, got, strict=True):
         assert a.shape == b.shape
         assert _relative(a, b) < 1e-12  # sums in another order: rounding only
@@ -54,9 +60,9 @@ def test_fused_under_vmap_equals_loop(batch):
     params = jax.tree_util.tree_map(lambda *leaves: jnp.stack(leaves), *[r[0] for r in records])
     us = jnp.stack([r[1] for r in records])
     ys = jnp.stack([r[2] for r in records])
-    batched = jax.vmap(lambda p, u, y: normal_equations(p, u, y, backend="fused"))(params, us, ys)
+    batched = jax.vmap(lambda p, u, y: _normal_equations(p, u, y, backend="fused"))(params, us, ys)
     for i, (p, u, y) in enumerate(records):
-        one = normal_equations(p, u, y, backend="xla")
+        one = _normal_equations(p, u, y, backend="xla")
         for a, b in zip(one, batched, strict=True):
             assert _relative(a, b[i]) < 1e-12
 
@@ -68,7 +74,7 @@ def test_truth_is_a_fixed_point_of_the_fused_step(orders):
     u = rng.uniform(-2, 2, 1000)
     vector, (_, _, y) = oracle.identifiable_system(rng, orders, u)
     params = CascadeParams.from_vector(jnp.asarray(vector), orders)
-    new, singular, cost, _ = voros_step(params, jnp.asarray(u), jnp.asarray(y), backend="fused")
+    new, singular, cost, _ = _voros_step(params, jnp.asarray(u), jnp.asarray(y), backend="fused")
     assert not bool(singular)
     np.testing.assert_allclose(new, vector, rtol=0, atol=1e-10)
     # the cost comes from the normal equations: rounding of |yc|^2 / N, not of J

@@ -1,5 +1,6 @@
 """Key-term separated regression (eqs. 15-18, 23-25) against the row-by-row oracle."""
 
+import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 import oracle
@@ -7,6 +8,10 @@ import pytest
 
 from jaxcascade import CascadeParams, Orders, regression, signals
 from jaxcascade._estimator._regression import solve_normal_equations
+
+# compiled: called eagerly, every `lax.scan` inside compiles a program of its own at
+# every call
+_signals = eqx.filter_jit(signals)
 
 ORDERS = [Orders(2, 2, 2, 2), Orders(1, 1, 1, 0), Orders(3, 2, 3, 1), Orders(2, 3, 1, 2)]
 
@@ -47,7 +52,7 @@ def test_truth_solves_noise_free_regression(orders):
     vector = oracle.random_system(rng, orders)
     params = _params(vector, orders)
     u = jnp.asarray(rng.uniform(-2, 2, 500))
-    s = signals(params, u)
+    s = _signals(params, u)
     reg = regression(params, u, s.y, s.v, s.x)
     assert np.all(np.asarray(reg.g1 * reg.g2) == 0)  # where both lines switch, left wins
     # eq. 16 holds identically at the truth; a dozen O(1) products: rounding only

@@ -27,10 +27,11 @@ def test_output_jacobian_equals_jacfwd(orders, draw):
     def output(vector):
         return signals(CascadeParams.from_vector(vector, orders, check=False), u).y
 
-    want = jax.jacfwd(output)(params.to_vector())
-    y, J = output_jacobian(params, u)
+    # compiled: eager `lax.scan`s under `jacfwd` compile a program per primitive call
+    want = jax.jit(jax.jacfwd(output))(params.to_vector())
+    y, J = jax.jit(output_jacobian)(params, u)
     assert J.shape == (300, orders.size)
     # exact up to rounding: the same switching decisions, the same arithmetic up to order
-    np.testing.assert_allclose(y, output(params.to_vector()), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(y, jax.jit(output)(params.to_vector()), rtol=0, atol=1e-12)
     np.testing.assert_allclose(J, want, rtol=0, atol=1e-8)
     assert float(jnp.max(jnp.abs(want))) > 0.5  # a Jacobian worth comparing

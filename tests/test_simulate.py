@@ -1,5 +1,6 @@
 """Simulation: the JAX blocks against the NumPy oracle, noise, keys and vmap."""
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -17,6 +18,10 @@ from jaxcascade import (
     simulate,
     uniform_input,
 )
+
+# compiled: called eagerly, every `lax.scan` inside compiles a program of its own at
+# every call
+_signals = eqx.filter_jit(signals)
 
 # p = 0, r = 1, nR = nL = 1 and three segments all appear
 ORDERS = [
@@ -37,7 +42,7 @@ def test_simulate_matches_oracle(orders):
         u = rng.uniform(-2, 2, 500)
         v, x, y = oracle.simulate(oracle.unpack(vector, orders), u)
         params = CascadeParams.from_vector(jnp.asarray(vector), orders)
-        got = signals(params, jnp.asarray(u))
+        got = _signals(params, jnp.asarray(u))
         # same sums in another order through a stable recursion: rounding stays ~1e-14
         np.testing.assert_allclose(got.v, v, rtol=0, atol=1e-10)
         np.testing.assert_allclose(got.x, x, rtol=0, atol=1e-10)

@@ -7,6 +7,7 @@ every estimator's statuses against the truth over many records; here, the cases 
 issue names.
 """
 
+import functools
 import json
 
 import jax
@@ -153,13 +154,14 @@ def test_validity_statistic_matches_numpy_and_ignores_the_noise_colour():
     np.testing.assert_allclose(
         float(validity_statistic(e, u)), _numpy_validity(np.asarray(e), np.asarray(u)), rtol=1e-9
     )
+    statistic = jax.jit(validity_statistic)  # one program, not one per eager call
     # noise independent of a white input passes, white or AR(1) with pole 0.9 once
     # whitened (each test about standard normal: bound 5 is P ~ 4e-4 per test)
     for k in jax.random.split(key_e, 6):
-        assert float(validity_statistic(jax.random.normal(k, (2000,)), u)) < 5.0
-        assert float(validity_statistic(whitened(_ar_noise(k, 2000, 0.9)), u)) < 5.0
+        assert float(statistic(jax.random.normal(k, (2000,)), u)) < 5.0
+        assert float(statistic(whitened(_ar_noise(k, 2000, 0.9)), u)) < 5.0
     # coloured and not whitened, it fails: the tests are not blind
-    assert float(validity_statistic(_ar_noise(key_e, 2000, 0.9), u)) > 5.0
+    assert float(statistic(_ar_noise(key_e, 2000, 0.9), u)) > 5.0
 
 
 @pytest.mark.parametrize("noise", ["none", "white", "ar0.9"])
@@ -189,12 +191,16 @@ def test_claim_refuses_what_the_model_cannot_describe_and_keeps_the_truth(noise)
     truth = ex.params().to_vector()
     names = list(ex.orders.names)
 
-    def status(vector, start=Status.converged, record=y, project=True):
+    # one compiled program per `project` (eagerly, each call compiles every scan anew)
+    @functools.partial(jax.jit, static_argnames="project")
+    def judged(vector, start, record, project):
         params = CascadeParams.from_vector(vector, ex.orders, check=False)
         simulated, jacobian = output_jacobian(params, u)
         jacobian = jacobian if project else None
-        code = claim(start, params, simulated - record, u, record, 5.0, jacobian=jacobian)
-        return Status(int(code))
+        return claim(start, params, simulated - record, u, record, 5.0, jacobian=jacobian)
+
+    def status(vector, start=Status.converged, record=y, project=True):
+        return Status(int(judged(vector, jnp.asarray(int(start)), record, project)))
 
     assert status(truth) is Status.converged
     assert status(truth, record=clipped) is Status.local_minimum
