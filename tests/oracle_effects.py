@@ -4,7 +4,7 @@ Written from the effects' documented definitions, one sample at a time, with exp
 Python loops, like `oracle.py` for the cascade (whose `simulate` it uses for the
 cascade itself). It imports nothing from jaxcascade: it reads the effects' parameter
 values from the model object (`model.params.to_dict()`, each effect's fields and its
-documented class constants such as `start_fractions`), never the package's code.
+documented constants, written out here: `ROTOR_STARTS`), never the package's code.
 
 The definitions, and where they are documented:
 
@@ -183,9 +183,20 @@ def parameters(effect) -> dict:
     for field in dataclasses.fields(effect):
         value = _array(getattr(effect, field.name))
         values[field.name] = float(value) if value.ndim == 0 else value
-    if hasattr(type(effect), "start_fractions"):
-        values["start_fractions"] = _array(type(effect).start_fractions)
+    if effect.name in ROTOR_STARTS:
+        values["start_fractions"] = ROTOR_STARTS[effect.name]
     return values
+
+
+# The rotor's starts averaged over, fractions of the slack half-width, as documented and
+# written out here (not read from the package's classes, so that a changed constant is
+# caught): `backlash_friction` "evenly on the slack" (nine starts, its class comment),
+# `backlash_friction_contacts` "at rest against either side of the slack (mean of the
+# two)" (its description).
+ROTOR_STARTS = {
+    "backlash_friction": np.linspace(-1.0, 1.0, 9),
+    "backlash_friction_contacts": np.array([-1.0, 1.0]),
+}
 
 
 def _input_effect(name, p, u):

@@ -185,3 +185,26 @@ def test_operators_of_the_reference_on_a_closed_form():
         oracle_effects.simulate(plain(example(1).params()), _input()),
         oracle.simulate(P, _input())[2],
     )
+
+
+@pytest.mark.parametrize("name", ["backlash_friction", "backlash_friction_contacts"])
+def test_rotor_starts_match_the_documented_ones(name):
+    # `_input` jumps onto a contact at its first samples, where every start of the rotor
+    # gives the same force: here the input grows slowly from zero, so the rotor stays in
+    # the slack for a while and the force there is the average over the documented starts
+    # (evenly on the slack; against either side of it), which differ by a margin.
+    model = MODELS[name]()
+    t = np.arange(N)
+    u = 0.6 * (t / N) * np.sin(2 * np.pi * t / 80)
+    effective = _floored(model) or None
+    want = oracle_effects.simulate(model, u, effective)
+    got = np.asarray(simulate_extended(model, jnp.asarray(u)))
+    np.testing.assert_allclose(got, want, rtol=0, atol=TOLERANCE * float(np.max(np.abs(want))))
+    others = {**oracle_effects.ROTOR_STARTS}
+    other = next(k for k in others if k != name)
+    oracle_effects.ROTOR_STARTS[name], saved = others[other], others[name]
+    try:
+        changed = oracle_effects.simulate(model, u, effective)
+    finally:
+        oracle_effects.ROTOR_STARTS[name] = saved
+    assert np.max(np.abs(changed - want)) > 1e-3 * float(np.max(np.abs(want)))
