@@ -1,9 +1,10 @@
 """pytest plugin of `benchmarks/mutation_check.py`: deletes one body of the package at run
 time, named by the environment variable `JAXCASCADE_MUTATION` (nothing without it).
 
-- `effect:NAME`: the effect's own `input`, `output`, `parallel`, their `*_with_state`
-  forms and `backlash` replaced by `Effect`'s (which change nothing): the effect is
-  there, with its parameters, and does nothing.
+- `effect:NAME`: the effect's `input`, `output`, `parallel`, their `*_with_state` forms
+  and `backlash` (its own or inherited from another effect) replaced on its class by
+  `Effect`'s, which change nothing: the effect is there, with its parameters, and does
+  nothing.
 - `starts:NAME`: a structural effect's `starts` return none (it is never tried).
 - `contacts`: `backlash_friction_contacts` with `backlash_friction`'s rotor starts (its
   only difference from it).
@@ -31,9 +32,11 @@ def apply(mutation: str) -> None:
         effect = EFFECTS[name]
         methods = ("input", "output", "parallel", "backlash")
         methods += ("input_with_state", "output_with_state", "parallel_with_state")
-        deleted = [m for m in methods if m in vars(effect)]
+        # its own or inherited from another effect (a variant such as
+        # backlash_friction_contacts): replaced on this class only
+        deleted = [m for m in methods if getattr(effect, m) is not getattr(Effect, m)]
         if not deleted:
-            raise SystemExit(f"mutation {mutation}: {effect.__name__} defines none of {methods}")
+            raise SystemExit(f"mutation {mutation}: {effect.__name__} overrides none of {methods}")
         for method in deleted:
             setattr(effect, method, vars(Effect)[method])
     elif kind == "starts":
