@@ -167,13 +167,16 @@ slow_tests() {  # issue 40: the slow test set, run and recorded per test (its te
     # records, the benchmarks and the damper, skip where ../shared/data is missing)
     python benchmarks/slow_tests.py --out results/slow_tests
 }
+default_tests() {  # issue 40: the default test run's time, test by test (against ~8 minutes)
+    python benchmarks/slow_tests.py --select default --out results/default_tests
+}
 mutations() {  # issue 40: each deleted body (an effect, pem's iteration, robust's multi-start)
     # against the default-run tests that must catch it
     python benchmarks/mutation_check.py --out results/mutation_check
 }
 all=(bench profile bench_robust speed distributed robust sweeps literal efficiency effects_loop loop
     stability backlash reproduce recursive inputs noise nonlinear statuses general general_brfd
-    slow_tests mutations)
+    slow_tests default_tests mutations)
 needs() {  # whether step $1 reads ../shared/data
     local s
     for s in "${needs_shared_data[@]}"; do [ "$s" = "$1" ] && return 0; done
