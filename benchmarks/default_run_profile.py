@@ -20,6 +20,7 @@ import datetime
 import json
 import os
 import pathlib
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -45,17 +46,23 @@ def main(argv=None) -> int:
     began = time.perf_counter()
     with tempfile.TemporaryDirectory() as folder:
         env = dict(os.environ, JAXCASCADE_PROFILE_DIR=folder)
-        env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(HERE), env.get("PYTHONPATH")]))
+        # the plugin alone on the path: benchmarks/ there would shadow packages by its
+        # scripts' names (nonlinear_benchmarks)
+        shutil.copy(HERE / "compile_profile_plugin.py", folder)
+        env["PYTHONPATH"] = os.pathsep.join(filter(None, [folder, env.get("PYTHONPATH")]))
         pytest = [sys.executable, "-m", "pytest", "-m", "not slow", "-q", "-p", "no:cacheprovider"]
         pytest += ["-n", str(args.workers), "-p", "compile_profile_plugin", *args.paths]
         status = subprocess.run(pytest, cwd=ROOT, env=env).returncode
-        parts = [json.loads(p.read_text()) for p in sorted(pathlib.Path(folder).glob("*.json"))]
+        found = sorted(pathlib.Path(folder).glob("*.json"))
+        parts = [json.loads(p.read_text()) for p in found]
     wall = time.perf_counter() - began
     tests = pd.DataFrame(
-        [{"test": k, **v} for part in parts for k, v in part["tests"].items()]
+        [{"test": k, **v} for part in parts for k, v in part["tests"].items()],
+        columns=["test", *COLUMNS],
     ).fillna(0.0)
     programs = pd.DataFrame(
-        [{"program": k, **v} for part in parts for k, v in part["programs"].items()]
+        [{"program": k, **v} for part in parts for k, v in part["programs"].items()],
+        columns=["program", *COLUMNS[1:]],
     ).fillna(0.0)
     for frame, columns in ((tests, COLUMNS), (programs, COLUMNS[1:])):
         for column in columns:

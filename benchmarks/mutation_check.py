@@ -20,8 +20,10 @@ import argparse
 import datetime
 import os
 import pathlib
+import shutil
 import subprocess
 import sys
+import tempfile
 import time
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
@@ -45,9 +47,15 @@ def mutations() -> list[tuple[str, str]]:
     return rows
 
 
+PLUGIN = pathlib.Path(tempfile.mkdtemp(prefix="jaxcascade-mutation-"))
+shutil.copy(HERE / "mutation_plugin.py", PLUGIN)
+
+
 def run(mutation: str, tests: str) -> tuple[int, str, float]:
     env = dict(os.environ, JAXCASCADE_MUTATION=mutation)
-    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(HERE), env.get("PYTHONPATH")]))
+    # the plugin alone on the path: benchmarks/ there would shadow packages by its
+    # scripts' names (nonlinear_benchmarks)
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(PLUGIN), env.get("PYTHONPATH")]))
     command = [sys.executable, "-m", "pytest", "-q", "-x", "-n", "0", "-p", "no:cacheprovider"]
     command += ["-p", "mutation_plugin", *tests.split()]
     began = time.perf_counter()

@@ -170,13 +170,16 @@ slow_tests() {  # issue 40: the slow test set, run and recorded per test (its te
 default_tests() {  # issue 40: the default test run's time, test by test (against ~8 minutes)
     python benchmarks/slow_tests.py --select default --out results/default_tests
 }
+profile_tests() {  # issues 40, 33: the default run's time by test file and by program
+    python benchmarks/default_run_profile.py --out results/default_run_profile
+}
 mutations() {  # issue 40: each deleted body (an effect, pem's iteration, robust's multi-start)
     # against the default-run tests that must catch it
     python benchmarks/mutation_check.py --out results/mutation_check
 }
 all=(bench profile bench_robust speed distributed robust sweeps literal efficiency effects_loop loop
     stability backlash reproduce recursive inputs noise nonlinear statuses general general_brfd
-    slow_tests default_tests mutations)
+    slow_tests default_tests profile_tests mutations)
 needs() {  # whether step $1 reads ../shared/data
     local s
     for s in "${needs_shared_data[@]}"; do [ "$s" = "$1" ] && return 0; done
