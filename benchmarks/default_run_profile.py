@@ -31,6 +31,22 @@ HERE = pathlib.Path(__file__).resolve().parent
 COLUMNS = ["wall_s", "compile_n", "trace_s", "lower_s", "compile_s"]
 
 
+def is_eager(program: str) -> bool:
+    """Whether a program is one operation called outside `jit` (`jit(add)`, `jit(scan)`):
+    named after a `jax.lax` primitive, a `jax.numpy` function or a control-flow
+    primitive. Programs of the package and of the tests have other names."""
+    import re
+
+    import jax
+    import jax.numpy as jnp
+
+    match = re.fullmatch(r"jit\(([a-z][a-z0-9_]*)\)", program)
+    if match is None:
+        return False
+    name = match.group(1)
+    return name in ("scan", "while", "cond") or hasattr(jax.lax, f"{name}_p") or hasattr(jnp, name)
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", default="results/default_run_profile")
@@ -79,7 +95,7 @@ def main(argv=None) -> int:
     out.parent.mkdir(parents=True, exist_ok=True)
     files.to_csv(f"{out}.csv", index=False)
     programs.to_csv(f"{out}_programs.csv", index=False)
-    eager = programs[programs.program.str.match(r"^jit\((?!_)")]
+    eager = programs[programs.program.map(is_eager)]
     given = sys.argv[1:] if argv is None else argv
     command = "python benchmarks/default_run_profile.py " + " ".join(given)
     date = datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
@@ -94,8 +110,9 @@ def main(argv=None) -> int:
         f"Summed over the workers: {totals.wall_s:.0f} s in tests, of which "
         f"{totals.compile_s:.0f} s in XLA's compile of {int(totals.compile_n)} programs, "
         f"{totals.trace_s:.0f} s tracing and {totals.lower_s:.0f} s lowering. Programs "
-        "named after one operation or `scan` with no leading underscore (`jit(scan)`, "
-        f"`jit(add)`, ...) are eager calls outside `jit`: {int(eager.compile_n.sum())} of "
+        "named after one operation (`jit(scan)`, `jit(add)`, ...: a `jax.lax` primitive or a "
+        "`jax.numpy` function) are eager calls outside `jit`: "
+        f"{int(eager.compile_n.sum())} of "
         f"them, {eager.compile_s.sum():.0f} s of compile.",
         "",
         "## By test file",
