@@ -140,7 +140,8 @@ def test_orders_parse_and_validation():
     assert Orders.parse("2,3,1,0") == Orders(nR=2, nL=3, r=1, p=0)
     assert Orders.parse(" 1, 1 ,2,2 ") == Orders(1, 1, 2, 2)
     assert Orders.parse(str(Orders(3, 2, 1, 4))) == Orders(3, 2, 1, 4)
-    for text in ("2,2,2", "2,2,2,2,2", "a,2,2,2", "2.5,2,2,2", ""):
+    assert Orders.parse("2,2,2,2,3") == Orders(2, 2, 2, 2, degree=3)
+    for text in ("2,2,2", "2,2,2,2,2,2", "a,2,2,2", "2.5,2,2,2", ""):
         with pytest.raises(ValueError, match="four integers"):
             Orders.parse(text)
     for text, field in (("0,2,2,2", "nR"), ("2,0,2,2", "nL"), ("2,2,0,2", "r"), ("2,2,2,-1", "p")):

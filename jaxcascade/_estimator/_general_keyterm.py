@@ -57,6 +57,7 @@ from ._literal import (
     stopping_rule,
 )
 from ._regression import key_term_columns, solve_gram
+from ._solution import PATH_ONLY, Solution, finite
 
 
 class KeyTermGeneral(eqx.Module):
@@ -177,3 +178,40 @@ def key_term_general(
     u, y = record(u, y, orders=orders, where="key_term_general")
     settings = (tol, se_tol, cost_tol, int(cycle_period), divergence_bound)
     return _iterate(u, y, orders, int(degree), int(max_iterations), settings)
+
+
+def key_term_solution(u, y, orders: Orders, **settings) -> Solution:
+    """The key-term iteration as the `literal` estimator's answer where `orders` have
+    curved branches (`Orders.degree > 1`): a `Solution` of those orders (the estimate's
+    vector is `to_vector`'s, theta's `C` turned back into `cR`; the history's rows after
+    `iterations` repeat the estimate, as `voros`'s do). Traceable and `vmap`-able (the
+    record is checked by the caller). `settings`: `voros`'s stopping settings
+    `max_iterations`, `tol`, `se_tol`, `cost_tol`, `cycle_period`, `divergence_bound`;
+    the iteration starts from the paper's initial values on the record's own range."""
+    keys = ("tol", "se_tol", "cost_tol", "cycle_period", "divergence_bound")
+    values = (settings[k] for k in keys)
+    tol, se_tol, cost_tol, cycle_period, divergence_bound = values
+    out = _iterate(
+        u,
+        y,
+        orders.straight,
+        orders.degree,
+        int(settings["max_iterations"]),
+        (tol, se_tol, cost_tol, int(cycle_period), divergence_bound),
+    )
+    theta = _theta(out.params, out.backlash)
+    params = CascadeParams.from_theta(theta, orders, check=False)
+    rows = jax.vmap(lambda t: CascadeParams.from_theta(t, orders, check=False).to_vector())
+    history = rows(out.history)
+    later = jnp.arange(history.shape[0])[:, None] > out.iterations
+    history = jnp.where(later, params.to_vector()[None], history)
+    solution = Solution(
+        params=params,
+        history=history,
+        iterations=out.iterations.astype(jnp.int32),
+        cost=out.cost,
+        status=out.status,
+        cycle_amplitude=jnp.zeros((), u.dtype),
+        path=jnp.asarray(PATH_ONLY, jnp.int32),
+    )
+    return finite(solution, history[0])

@@ -48,8 +48,19 @@ from .._status import Status
 from .._system._general_backlash import GeneralBacklash, branch_report
 from .._system._model import CascadeParams, Orders
 from .._system._validate import record
-from ._general_refine import GeneralRefined, _output, packed, robust_general, unpack
+from ._general_refine import (
+    GeneralRefined,
+    _output,
+    curved_solution,
+    fit_traced,
+    packed,
+    rising,
+    robust_general,
+    unpack,
+)
 from ._refine import least_squares
+from ._robust import DEFAULTS as ROBUST
+from ._solution import Solution, finite
 
 
 class GeneralPem(eqx.Module):
@@ -143,3 +154,74 @@ def pem_general(
     if not increasing and int(status) == Status.converged:
         status = jnp.asarray(Status.failed, jnp.int32)
     return GeneralPem(params, curved, c, cost, status, steps, increasing)
+
+
+def curved_pem_solution(
+    u,
+    y,
+    orders: Orders,
+    key=None,
+    *,
+    order,
+    criterion,
+    max_steps,
+    rtol,
+    atol,
+    threshold,
+    n_starts,
+    fallback_batch,
+    retries,
+):
+    """The `pem` estimator's answer where `orders` have curved branches
+    (`Orders.degree > 1`): `pem_general`'s method, traced and `vmap`-able (the record and
+    the settings are checked by the caller). The output-error start is `robust`'s
+    (`_general_refine.curved_solution`, with `pem`'s `threshold`, `n_starts`,
+    `fallback_batch`, `retries`); the AR model's order is chosen on its residual
+    (`fit_ar`, up to `order`), its coefficients beyond that order held at zero; then
+    Levenberg-Marquardt (`fit_traced`) on the one-step-ahead prediction error over the
+    cascade, the curvature and the AR model. A failed start stays a failure; a converged fit whose
+    branches do not rise on the fitted range of x is `failed` (`rising`). The history's
+    rows: the start's straight estimate, the start, the estimate."""
+    dtype = u.dtype
+    robust_settings = dict(
+        ROBUST, threshold=threshold, n_starts=n_starts, fallback_batch=fallback_batch
+    )
+    start = curved_solution(u, y, orders, key, **dict(robust_settings, retries=retries))
+    straight = CascadeParams.from_vector(
+        start.params.to_vector()[: orders.straight_size], orders.straight, check=False
+    )
+    nd = GeneralBacklash.unchecked(
+        straight.cL, straight.mR, straight.cR, start.params.curveL, start.params.curveR
+    )
+    c0, chosen = fit_ar(y - _output(straight, nd, u)[0], order, criterion)
+    active = jnp.arange(order) < chosen  # coefficients beyond the order stay zero
+    head = orders.size
+    z0 = jnp.concatenate([packed(straight, nd, u), ar_to_unconstrained(c0)])
+    z0 = z0.at[head:].set(jnp.where(active, z0[head:], 0.0))
+
+    def noise(z):
+        return ar_from_unconstrained(jnp.where(active, z[head:], 0.0))
+
+    def residual(z):
+        params, curved = unpack(z, orders.straight, orders.degree, u)
+        return whiten(_output(params, curved, u)[0] - y, noise(z))
+
+    z, cost, status, steps = fit_traced(residual, z0, max_steps, rtol, atol)
+    params, curved = unpack(z, orders.straight, orders.degree, u)
+    x = _output(params, curved, u)[1]
+    status = jnp.where((status == Status.converged) & ~rising(curved, x), Status.failed, status)
+    usable = (start.status == Status.converged) | (start.status == Status.cycled)
+    status = jnp.where(usable, status, start.status).astype(jnp.int32)
+    vector = jnp.concatenate([params.to_vector(), curved.curveL, curved.curveR]).astype(dtype)
+    estimate = CascadeParams.from_vector(vector, orders, check=False)
+    history = jnp.stack([start.history[0], start.params.to_vector(), vector])
+    solution = Solution(
+        params=estimate,
+        history=history,
+        iterations=(start.iterations + steps).astype(jnp.int32),
+        cost=cost,
+        status=status,
+        cycle_amplitude=jnp.zeros((), dtype),
+        path=start.path,
+    )
+    return finite(solution, start.params.to_vector())

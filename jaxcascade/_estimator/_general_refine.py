@@ -15,7 +15,10 @@ turn is not `converged`.
 
 from __future__ import annotations
 
+import functools
+
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
@@ -26,7 +29,9 @@ from .._system._general_backlash import GeneralBacklash, branch_report, general_
 from .._system._model import CascadeParams
 from .._system._simulate import linear_block, pwl
 from .._system._validate import record
+from ._levenberg import levenberg_marquardt
 from ._refine import from_unconstrained, least_squares, to_unconstrained
+from ._solution import Solution, finite
 
 
 class GeneralRefined(eqx.Module):
@@ -128,3 +133,80 @@ def robust_general(u, y, orders, degree: int, *, key=None, **settings) -> Genera
     u, y = record(u, y, orders=orders, where="robust_general")
     straight = Robust(**settings)(u, y, orders, key=key).params
     return refine_general(straight, GeneralBacklash.straight(straight, degree), u, y)
+
+
+# Points of the record's range of x at which a traced fit's branches are checked to rise
+# (`curved_solution`; `branch_report` also finds the slopes' minima between grid points).
+_SLOPE_POINTS = 401
+
+
+def fit_traced(residual, z0, max_steps: int, rtol, atol):
+    """Levenberg-Marquardt on `residual(z)` from `z0` for the traced estimators of curved
+    branches: the package's own (`_levenberg`, on normal equations; the Jacobian by
+    forward differentiation, `jax.jacfwd`), which needs no LAPACK call. (Optimistix's,
+    which the single-record functions use, solves each step by a QR factorisation; in
+    the batched robust program of `general2` XLA's CPU compiler could not find that
+    LAPACK kernel.) Returns `(z, cost, status, steps)` as `levenberg_marquardt`."""
+
+    def evaluate(z):
+        J, r = jax.jacfwd(lambda v: (residual(v), residual(v)), has_aux=True)(z)
+        return r, J.T @ J, J.T @ r
+
+    size = jax.eval_shape(residual, z0).shape[0]
+    return levenberg_marquardt(
+        evaluate, z0, max_steps=max_steps, rtol=rtol, atol=atol, residual_size=size
+    )
+
+
+def _error(z, *, orders, u, y):
+    """The simulation error of the unconstrained vector `z` (`packed`) for `orders`."""
+    params, curved = unpack(z, orders.straight, orders.degree, u)
+    return _output(params, curved, u)[0] - y
+
+
+def rising(nd: GeneralBacklash, x) -> Array:
+    """Whether both branches of `nd` rise on `[min x, max x]`, checked on `_SLOPE_POINTS`
+    evenly spaced values (traceable: `branch_report` is its exact host form)."""
+    grid = jnp.linspace(jnp.min(x), jnp.max(x), _SLOPE_POINTS)
+    slopes = jax.vmap(jax.jacfwd(lambda s: jnp.stack(nd.branches(s))))(grid)
+    return jnp.all(slopes > 0)
+
+
+def curved_solution(u, y, orders, key=None, *, steps=200, rtol=1e-10, atol=1e-12, **settings):
+    """The `robust` estimator's answer where `orders` have curved branches
+    (`Orders.degree > 1`): its straight-backlash fit (`_robust._robust` on
+    `orders.straight`, with `settings`), then Levenberg-Marquardt with the branches'
+    curvature from zero (`refine_general`'s fit). Traceable and `vmap`-able (the record
+    is checked by the caller; Levenberg-Marquardt is `fit_traced`'s); the status is the
+    curved fit's, `failed` where it converged to branches that do not rise on the fitted
+    range of x (`rising`). The history's rows: the straight estimate (no curvature), the
+    curved one."""
+    from ._robust import _robust
+
+    straight = _robust(u, y, orders.straight, key, **settings)
+    start = GeneralBacklash.straight(straight.params, orders.degree)
+    residual = functools.partial(_error, orders=orders, u=u, y=y)
+    z0 = packed(straight.params, start, u)
+    z, cost, status, fit_steps = fit_traced(residual, z0, steps, rtol, atol)
+    params, curved = unpack(z, orders.straight, orders.degree, u)
+    x = _output(params, curved, u)[1]
+    status = jnp.where(
+        (status == Status.converged) & ~rising(curved, x), Status.failed, status
+    ).astype(jnp.int32)
+
+    def full(cascade, nd):
+        vector = jnp.concatenate([cascade.to_vector(), nd.curveL, nd.curveR])
+        return CascadeParams.from_vector(vector.astype(u.dtype), orders, check=False)
+
+    estimate = full(params, curved)
+    history = jnp.stack([full(straight.params, start).to_vector(), estimate.to_vector()])
+    solution = Solution(
+        params=estimate,
+        history=history,
+        iterations=(straight.iterations + fit_steps).astype(jnp.int32),
+        cost=cost,
+        status=status,
+        cycle_amplitude=jnp.zeros((), u.dtype),
+        path=straight.path,
+    )
+    return finite(solution, history[0])

@@ -402,6 +402,11 @@ class Literal(Estimator):
     DL1 = -1.0 (`initial_guess`); without it they follow the sample range of `u`, which
     is slightly narrower and differs between records. The settings are `voros`'s: the
     first-step reading, the stopping rule, and `domain_stop` for the safeguarded variant.
+
+    For orders with curved backlash branches (`Orders.degree > 1`) it runs the general
+    backlash's key-term iteration (`_general_keyterm.key_term_solution`) with the same
+    stopping settings, from the paper's initial values on the record's own range
+    (`first_step`, `domain_stop` and `input_range` do not apply there).
     """
 
     name: ClassVar[str] = "literal"
@@ -415,6 +420,11 @@ class Literal(Estimator):
     cycle_period: int = setting(_VOROS["cycle_period"])
     domain_stop: bool = setting(_VOROS["domain_stop"])
     divergence_bound: float = setting(_VOROS["divergence_bound"])
+
+    def stopping(self) -> dict:
+        """The stopping settings, which the key-term iteration of curved branches shares."""
+        names = ("max_iterations", "tol", "se_tol", "cost_tol", "cycle_period", "divergence_bound")
+        return {name: getattr(self, name) for name in names}
 
     def __check_init__(self):
         if self.first_step not in FIRST_STEPS:
@@ -434,7 +444,12 @@ class Literal(Estimator):
         input_range: tuple[float, float] | None = None,
     ) -> Solution:
         del key  # deterministic
-        u, y = record(u, y, orders=orders, where="Literal")
+        u, y = record(u, y, orders=orders, where="Literal", curved=True)
+        if orders.degree > 1:
+            # curved branches: the key-term iteration of the general backlash
+            from ._general_keyterm import key_term_solution
+
+            return key_term_solution(u, y, orders, **self.stopping())
         if input_range is None:
             u_min, u_max = jnp.min(u), jnp.max(u)
         else:

@@ -280,7 +280,8 @@ def _usable(status):
 
 class Pem(Estimator):
     """The cascade with an AR noise model by prediction error (`pem`, module docstring);
-    the settings are `pem`'s keyword arguments."""
+    the settings are `pem`'s keyword arguments. For orders with curved backlash branches
+    (`Orders.degree > 1`), `pem_general`'s method (`_general_pem.curved_pem_solution`)."""
 
     name: ClassVar[str] = "pem"
     summary: ClassVar[str] = (
@@ -310,5 +311,11 @@ class Pem(Estimator):
         input_range: tuple[float, float] | None = None,
     ) -> Solution:
         del input_range  # the starts are scaled to the record's own range
-        u, y = record(u, y, orders=orders, where="Pem")
-        return pem(u, y, orders, key, **{name: getattr(self, name) for name in DEFAULTS})
+        u, y = record(u, y, orders=orders, where="Pem", curved=True)
+        settings = {name: getattr(self, name) for name in DEFAULTS}
+        if orders.degree > 1:
+            # curved branches: `pem_general`'s method, traced (`_general_pem`)
+            from ._general_pem import curved_pem_solution
+
+            return curved_pem_solution(u, y, orders, key, **settings)
+        return pem(u, y, orders, key, **settings)

@@ -519,7 +519,8 @@ def judge(status, cost, y, start, estimate, trusted_start, rtol: float):
 class Robust(Estimator):
     """The literal iteration refined by output-error least squares, with a multi-start
     fallback (`robust`, module docstring); the settings are `robust`'s keyword
-    arguments."""
+    arguments. For orders with curved backlash branches (`Orders.degree > 1`) that fit
+    is then refined with the branches' curvature (`_general_refine.curved_solution`)."""
 
     name: ClassVar[str] = "robust"
     summary: ClassVar[str] = (
@@ -549,5 +550,11 @@ class Robust(Estimator):
         input_range: tuple[float, float] | None = None,
     ) -> Solution:
         del input_range  # the starts are scaled to the record's own range
-        u, y = record(u, y, orders=orders, where="Robust")
-        return robust(u, y, orders, key, **{name: getattr(self, name) for name in DEFAULTS})
+        u, y = record(u, y, orders=orders, where="Robust", curved=True)
+        settings = {name: getattr(self, name) for name in DEFAULTS}
+        if orders.degree > 1:
+            # curved branches: the straight fit, then the curvature (`_general_refine`)
+            from ._general_refine import curved_solution
+
+            return curved_solution(u, y, orders, key, **settings)
+        return robust(u, y, orders, key, **settings)

@@ -34,7 +34,9 @@ TOML layout (every key optional except the system):
     # outliers: fraction = 0.02, size = 10 (in the Gaussian part's stds)
 
     [system]                         # instead of `example`
-    orders = "2,2,2,2"               # optional, inferred from the names
+    orders = "2,2,2,2"               # optional, inferred from the names; a fifth
+                                     # number is the backlash branches' degree (with
+                                     # mL2.., mR2.. among the params; literal, robust)
     params = { MR1 = 1.2, MR2 = -1.4, DR1 = 1.0, ... }
 
     [system]                         # or: the random family (`_prior.random_system`)

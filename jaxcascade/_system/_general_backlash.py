@@ -32,11 +32,20 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from ._model import CascadeParams, Orders
-from ._simulate import Signals, heaviside, linear_block, pwl
+from ._simulate import (  # the branches' simulation, shared with `signals` at degree > 1
+    Signals,
+    _curvature,
+    _plus,
+    general_backlash,
+    general_switches,  # noqa: F401 (re-exported: the block and its rule in one module)
+    linear_block,
+    pwl,
+)
 from ._validate import record
 
-# Largest branch degree: cubic branches are what the sources use; quartic leaves room.
-MAX_DEGREE = 4
+# Largest branch degree (`Orders.MAX_DEGREE`): cubic branches are what the sources use;
+# quartic leaves room.
+MAX_DEGREE = Orders.MAX_DEGREE
 
 
 class GeneralBacklash(eqx.Module):
@@ -141,22 +150,6 @@ class GeneralBacklash(eqx.Module):
         return left, _plus(mR * (x - cR), _curvature(self.curveR, x - cR))
 
 
-def _curvature(curve, s):
-    """`sum_{i=2..q} curve[i-2] s^i` by Horner's rule; None without terms (degree 1), so
-    that the straight backlash's expressions are used unchanged."""
-    curve = jnp.asarray(curve, s.dtype)
-    if curve.shape[-1] == 0:
-        return None
-    total = curve[-1]
-    for c in curve[-2::-1]:
-        total = c + s * total
-    return s * s * total
-
-
-def _plus(value, term):
-    return value if term is None else value + term
-
-
 def _other_rising_zero(slope: float, curve: np.ndarray) -> float | None:
     """A real zero `s != 0` of `slope s + sum curve[i-2] s^i` at which it rises, or None.
     (The branch in powers of `s`, its shifted input: `s = 0` is its expansion point.)"""
@@ -172,38 +165,6 @@ def _other_rising_zero(slope: float, curve: np.ndarray) -> float | None:
             if np.polynomial.polynomial.polyval(root.real, derivative) > 0:
                 return float(root.real)
     return None
-
-
-def general_switches(nd: GeneralBacklash, x, y_prev) -> tuple[Array, Array]:
-    """Switching variables `g1` (left branch active) and `g2` (right branch active) of
-    the general backlash; at degree 1 exactly `_simulate.backlash_switches`."""
-    cL, mR, cR = (jnp.asarray(c, x.dtype) for c in (nd.cL, nd.mR, nd.cR))
-    g1 = heaviside(_plus(x + cL, _curvature(nd.curveL, x + cL)) - y_prev)
-    rise = y_prev - mR * x + mR * cR
-    curve = _curvature(nd.curveR, x - cR)
-    g2 = heaviside((rise if curve is None else rise - curve) / mR) * (1 - g1)
-    return g1, g2
-
-
-def general_backlash(nd: GeneralBacklash, x: Float[Array, " T"], y_prev=None) -> Float[Array, " T"]:
-    """The general backlash on the signal `x` as a `lax.scan`, its state starting at
-    `y_prev` (the output before `x(0)`; default 0, rest). At degree 1 every expression
-    is `_simulate.backlash`'s: the same output bit for bit."""
-    cL, mR, cR = (jnp.asarray(c, x.dtype) for c in (nd.cL, nd.mR, nd.cR))
-    y0 = jnp.zeros((), x.dtype) if y_prev is None else jnp.asarray(y_prev, x.dtype)
-
-    def step(y_prev, x_t):
-        g1, g2 = general_switches(nd, x_t, y_prev)
-        left = _curvature(nd.curveL, x_t + cL)
-        right = _curvature(nd.curveR, x_t - cR)
-        y_t = g1 * _plus(x_t + cL, left) + g2 * mR * (x_t - cR)
-        if right is not None:
-            y_t = y_t + g2 * right
-        y_t = y_t + (1 - g1) * (1 - g2) * y_prev
-        return y_t, y_t
-
-    _, y = jax.lax.scan(step, y0, x)
-    return y
 
 
 def general_signals(params: CascadeParams, nd: GeneralBacklash, u: Float[Array, " T"]) -> Signals:

@@ -20,6 +20,11 @@ class Orders:
     - `nR`, `nL`: number of right / left segments of the piecewise-linear block (>= 1).
     - `r`: numerator order of the linear block, `A(q) = q^-1 + a2 q^-2 + ... + ar q^-r` (>= 1).
     - `p`: denominator order, `B(q) = b1 q^-1 + ... + bp q^-p` (>= 0).
+    - `degree`: the backlash branches' polynomial degree `q` (1 to `MAX_DEGREE`; 1, the
+      default, is the 2016 paper's straight backlash). At `q > 1` the parameters go on
+      with the branches' curvature terms `mL2..mLq`, `mR2..mRq` (the general output
+      backlash, `_general_backlash`, `docs/general_backlash.md`); at `q = 1` nothing of
+      the layout, the names or the text form changes.
 
     The largest supported orders are `MAX_SEGMENTS` (8) segments per side and `MAX_LAG`
     (16) for `r` and `p`: at most 64 parameters, so every allowed combination also fits
@@ -29,12 +34,14 @@ class Orders:
 
     MAX_SEGMENTS: ClassVar[int] = 8
     MAX_LAG: ClassVar[int] = 16
+    MAX_DEGREE: ClassVar[int] = 4
     SAMPLES_PER_PARAMETER: ClassVar[int] = 10
 
     nR: int = 2
     nL: int = 2
     r: int = 2
     p: int = 2
+    degree: int = 1
 
     def __post_init__(self):
         limits = (
@@ -42,6 +49,7 @@ class Orders:
             ("nL", 1, self.MAX_SEGMENTS),
             ("r", 1, self.MAX_LAG),
             ("p", 0, self.MAX_LAG),
+            ("degree", 1, self.MAX_DEGREE),
         )
         for field, low, high in limits:
             value = getattr(self, field)
@@ -50,15 +58,19 @@ class Orders:
             if value > high:
                 raise ValueError(
                     f"Order {field} = {value} is above the largest supported, {high} "
-                    f"(nR, nL <= {self.MAX_SEGMENTS}; r, p <= {self.MAX_LAG})."
+                    f"(nR, nL <= {self.MAX_SEGMENTS}; r, p <= {self.MAX_LAG}; "
+                    f"degree <= {self.MAX_DEGREE})."
                 )
 
     @classmethod
     def parse(cls, text: str) -> Orders:
-        """Read orders from `"nR,nL,r,p"`."""
+        """Read orders from `"nR,nL,r,p"`, or `"nR,nL,r,p,q"` with the branch degree."""
         parts = [part.strip() for part in str(text).split(",")]
-        if len(parts) != 4 or not all(part.lstrip("-").isdigit() for part in parts):
-            raise ValueError(f"Orders must be four integers 'nR,nL,r,p', got {text!r}.")
+        if len(parts) not in (4, 5) or not all(part.lstrip("-").isdigit() for part in parts):
+            raise ValueError(
+                f"Orders must be four integers 'nR,nL,r,p' (or five, 'nR,nL,r,p,q' with the "
+                f"backlash branches' degree q), got {text!r}."
+            )
         return cls(*(int(part) for part in parts))
 
     @property
@@ -72,19 +84,32 @@ class Orders:
             + tuple(f"a{i}" for i in range(2, self.r + 1))
             + tuple(f"b{j}" for j in range(1, self.p + 1))
             + ("cL", "mR", "cR")
+            + tuple(f"mL{i}" for i in range(2, self.degree + 1))
+            + tuple(f"mR{i}" for i in range(2, self.degree + 1))
         )
 
     @property
     def size(self) -> int:
         """Number of free parameters (length of theta)."""
+        return self.straight_size + 2 * (self.degree - 1)
+
+    @property
+    def straight_size(self) -> int:
+        """Number of parameters up to `cR`: the cascade with the straight backlash."""
         return 2 * self.nR + 2 * self.nL - 2 + (self.r - 1) + self.p + 3
+
+    @property
+    def straight(self) -> Orders:
+        """These orders with straight branches (degree 1)."""
+        return dataclasses.replace(self, degree=1)
 
     # ---- the parameter-vector layout (the one place it is written) --------------------
 
     @property
     def slices(self) -> dict[str, slice]:
         """Where each field of `CascadeParams` sits in the vector (`names` order):
-        `MR`, `DR`, `ML`, `DL`, `a`, `b`, `cL`, `mR`, `cR` (the last three of length 1)."""
+        `MR`, `DR`, `ML`, `DL`, `a`, `b`, `cL`, `mR`, `cR` (the three of length 1), `curveL`,
+        `curveR` (`mL2..mLq`, `mR2..mRq`: empty at degree 1)."""
         out, start = {}, 0
         for field, length in zip(_ARRAY_FIELDS, self.lengths, strict=True):
             out[field] = slice(start, start + length)
@@ -94,23 +119,29 @@ class Orders:
     @property
     def lengths(self) -> tuple[int, ...]:
         """Length of each field, in `_ARRAY_FIELDS` order."""
-        return (self.nR, self.nR - 1, self.nL, self.nL - 1, self.r - 1, self.p, 1, 1, 1)
+        q = self.degree - 1
+        return (self.nR, self.nR - 1, self.nL, self.nL - 1, self.r - 1, self.p, 1, 1, 1, q, q)
 
     @property
     def static_dynamic(self) -> slice:
         """The NS and LD parameters (the paper's first step estimates only these)."""
-        return slice(0, self.size - 3)
+        return slice(0, self.straight_size - 3)
 
     @property
     def backlash(self) -> slice:
         """The backlash parameters `cL`, `mR`, `cR` (`C = cR mR` in theta)."""
-        return slice(self.size - 3, self.size)
+        return slice(self.straight_size - 3, self.straight_size)
+
+    @property
+    def curvature(self) -> slice:
+        """The branches' curvature terms `mL2..mLq`, `mR2..mRq` (empty at degree 1)."""
+        return slice(self.straight_size, self.size)
 
     @property
     def g1_columns(self) -> int:
         """Number of regressor columns that carry g1 (NS, LD and cL): the first block of
         the block-diagonal normal equations; the `mR` and `C` columns carry g2."""
-        return self.size - 2
+        return self.straight_size - 2
 
     @property
     def breakpoints(self) -> tuple[int, ...]:
@@ -137,10 +168,12 @@ class Orders:
         return self.SAMPLES_PER_PARAMETER * self.size
 
     def __str__(self) -> str:
-        return f"{self.nR},{self.nL},{self.r},{self.p}"
+        text = f"{self.nR},{self.nL},{self.r},{self.p}"
+        return text if self.degree == 1 else f"{text},{self.degree}"
 
 
-_ARRAY_FIELDS = ("MR", "DR", "ML", "DL", "a", "b", "cL", "mR", "cR")
+_ARRAY_FIELDS = ("MR", "DR", "ML", "DL", "a", "b", "cL", "mR", "cR", "curveL", "curveR")
+_SCALARS = ("cL", "mR", "cR")
 
 
 def _is_concrete(*values) -> bool:
@@ -154,13 +187,18 @@ class CascadeParams(eqx.Module):
     + sum_j ML_j h(u - DL_{j-1})(u - DL_{j-1})` with `DR_0 = DL_0 = 0`; slopes are
     increments, the slope of right segment k is `MR_1 + ... + MR_k`.
     LD (eq. 6): `x(t) = v(t-1) + sum_{i>=2} a_i v(t-i) - sum_j b_j x(t-j)`.
-    ND (eq. 9): backlash with slopes `mL = 1`, `mR` and gaps `cL`, `cR`.
+    ND (eq. 9): backlash with slopes `mL = 1`, `mR` and gaps `cL`, `cR`; at branch degree
+    `q > 1` (`Orders.degree`) the general backlash, its branches
+    `fL(x) = (x + cL) + sum_i mL_i (x + cL)^i`, `fR(x) = mR (x - cR) + sum_i mR_i (x - cR)^i`
+    (`_general_backlash`).
 
     Fields (shapes follow `orders`, a static field):
     - `MR`: `Float[Array, " nR"]`, `DR`: `Float[Array, " nR-1"]` (increasing, > 0).
     - `ML`: `Float[Array, " nL"]`, `DL`: `Float[Array, " nL-1"]` (decreasing, < 0).
     - `a`: `Float[Array, " r-1"]` holding a2..ar; `b`: `Float[Array, " p"]`.
     - `cL`, `mR`, `cR`: scalars (`mR > 0`, gaps >= 0).
+    - `curveL`, `curveR`: `Float[Array, "... q-1"]`, `mL2..mLq` and `mR2..mRq` (optional:
+      empty, of the batch's shape, when not given; their length must be `degree - 1`).
 
     Leading batch dimensions are allowed on every array field (for `vmap`); the
     invariants are checked once at construction, and only on concrete values.
@@ -176,6 +214,16 @@ class CascadeParams(eqx.Module):
     mR: Float[Array, ...]
     cR: Float[Array, ...]
     orders: Orders = eqx.field(static=True)
+    curveL: Float[Array, "... qm1"] = None
+    curveR: Float[Array, "... qm1"] = None
+
+    def __post_init__(self):
+        # straight branches (or degree 1) need no curvature: empty, of the batch's shape
+        for name in ("curveL", "curveR"):
+            if getattr(self, name) is None:
+                mR = jnp.asarray(self.mR)
+                dtype = mR.dtype if jnp.issubdtype(mR.dtype, jnp.floating) else float
+                self.__setattr__(name, jnp.zeros(jnp.shape(mR) + (0,), dtype))
 
     def __check_init__(self):
         o = self.orders
@@ -186,6 +234,8 @@ class CascadeParams(eqx.Module):
             "DL": (self.DL, o.nL - 1, "nL - 1"),
             "a": (self.a, o.r - 1, "r - 1 (a2..ar)"),
             "b": (self.b, o.p, "p"),
+            "curveL": (self.curveL, o.degree - 1, "degree - 1 (mL2..mLq)"),
+            "curveR": (self.curveR, o.degree - 1, "degree - 1 (mR2..mRq)"),
         }
         for name, (value, expected, what) in lengths.items():
             if jnp.shape(value)[-1:] != (expected,):
@@ -213,7 +263,7 @@ class CascadeParams(eqx.Module):
             )
 
     def _arrays(self):
-        return (self.MR, self.DR, self.ML, self.DL, self.a, self.b, self.cL, self.mR, self.cR)
+        return tuple(getattr(self, field) for field in _ARRAY_FIELDS)
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -230,7 +280,7 @@ class CascadeParams(eqx.Module):
     def to_theta(self) -> Float[Array, "... P"]:
         """The paper's theta (eq. 18): like `to_vector` but ending in `C = cR mR`."""
         vector = self.to_vector()
-        return vector.at[..., -1].set(self.cR * self.mR)
+        return vector.at[..., self.orders.straight_size - 1].set(self.cR * self.mR)
 
     @classmethod
     def from_vector(
@@ -248,12 +298,16 @@ class CascadeParams(eqx.Module):
                 f"got {jnp.shape(vector)[-1]}."
             )
         slices = o.slices
-        parts = [vector[..., slices[field]] for field in _ARRAY_FIELDS[:6]]
-        parts += [vector[..., slices[field].start] for field in _ARRAY_FIELDS[6:]]
+        parts = {
+            field: vector[..., slices[field].start]
+            if field in _SCALARS
+            else vector[..., slices[field]]
+            for field in _ARRAY_FIELDS
+        }
         if check:
-            return cls(*parts, o)
+            return cls(**parts, orders=o)
         self = object.__new__(cls)  # what equinox itself does when unflattening
-        for field, value in zip(_ARRAY_FIELDS, parts, strict=True):
+        for field, value in parts.items():
             object.__setattr__(self, field, value)
         object.__setattr__(self, "orders", o)
         return self
@@ -263,7 +317,8 @@ class CascadeParams(eqx.Module):
         cls, theta: Float[Array, "... P"], orders: Orders, *, check: bool = True
     ) -> CascadeParams:
         """Inverse of `to_theta`: recovers `cR = C / mR`."""
-        vector = theta.at[..., -1].set(theta[..., -1] / theta[..., -2])
+        k = orders.straight_size - 1
+        vector = theta.at[..., k].set(theta[..., k] / theta[..., k - 1])
         return cls.from_vector(vector, orders, check=check)
 
     @classmethod
@@ -311,7 +366,8 @@ def _infer_orders(values: Mapping[str, float]) -> Orders:
     nR, nL = count("MR"), count("ML")
     r = count("a") + 1
     p = count("b")
-    return Orders(nR=max(nR, 1), nL=max(nL, 1), r=r, p=p)
+    degree = count("mL") + 1
+    return Orders(nR=max(nR, 1), nL=max(nL, 1), r=r, p=p, degree=degree)
 
 
 def reflection_coefficients(b: Float[Array, " p"]) -> Float[Array, " p"]:

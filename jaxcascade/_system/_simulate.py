@@ -1,4 +1,5 @@
-"""Simulation of the cascade: piecewise-linear NS, linear LD, backlash ND (eqs. 1-11)."""
+"""Simulation of the cascade: piecewise-linear NS, linear LD, backlash ND (eqs. 1-11),
+with straight branches or, at branch degree > 1 (`Orders.degree`), curved ones."""
 
 from __future__ import annotations
 
@@ -131,6 +132,60 @@ def backlash(params: CascadeParams, x: Float[Array, " T"]) -> Float[Array, " T"]
     return y
 
 
+# -- The general output backlash's branches (issue 39, `_general_backlash`) -------------
+#
+# `nd` below is anything with the fields `cL`, `mR`, `cR`, `curveL`, `curveR`: a
+# `_general_backlash.GeneralBacklash`, or `CascadeParams` of branch degree > 1.
+
+
+def _curvature(curve, s):
+    """`sum_{i=2..q} curve[i-2] s^i` by Horner's rule; None without terms (degree 1), so
+    that the straight backlash's expressions are used unchanged."""
+    curve = jnp.asarray(curve, s.dtype)
+    if curve.shape[-1] == 0:
+        return None
+    total = curve[-1]
+    for c in curve[-2::-1]:
+        total = c + s * total
+    return s * s * total
+
+
+def _plus(value, term):
+    return value if term is None else value + term
+
+
+def general_switches(nd, x, y_prev) -> tuple[Array, Array]:
+    """Switching variables `g1` (left branch active) and `g2` (right branch active) of
+    the general backlash; at degree 1 exactly `backlash_switches`."""
+    cL, mR, cR = (jnp.asarray(c, x.dtype) for c in (nd.cL, nd.mR, nd.cR))
+    g1 = heaviside(_plus(x + cL, _curvature(nd.curveL, x + cL)) - y_prev)
+    rise = y_prev - mR * x + mR * cR
+    curve = _curvature(nd.curveR, x - cR)
+    g2 = heaviside((rise if curve is None else rise - curve) / mR) * (1 - g1)
+    return g1, g2
+
+
+def general_backlash(nd, x: Float[Array, " T"], y_prev=None) -> Float[Array, " T"]:
+    """The general backlash on the signal `x` as a `lax.scan`, its state starting at
+    `y_prev` (the output before `x(0)`; default 0, rest). At degree 1 every expression
+    is `backlash`'s: the same output bit for bit."""
+    cL, mR, cR = (jnp.asarray(c, x.dtype) for c in (nd.cL, nd.mR, nd.cR))
+    y0 = jnp.zeros((), x.dtype) if y_prev is None else jnp.asarray(y_prev, x.dtype)
+
+    def step(y_prev, x_t):
+        g1, g2 = general_switches(nd, x_t, y_prev)
+        left = _curvature(nd.curveL, x_t + cL)
+        right = _curvature(nd.curveR, x_t - cR)
+        y_t = g1 * _plus(x_t + cL, left) + g2 * mR * (x_t - cR)
+        if right is not None:
+            y_t = y_t + g2 * right
+        y_t = y_t + (1 - g1) * (1 - g2) * y_prev
+        return y_t, y_t
+
+    _, y = jax.lax.scan(step, y0, x)
+    return y
+
+
 class Signals(NamedTuple):
     """Internal and output signals of one simulated record, each `Float[Array, " T"]`."""
 
@@ -145,6 +200,8 @@ def signals(params: CascadeParams, u: Float[Array, " T"]) -> Signals:
     u = _input(params, u, "signals")
     v = pwl(params, u)
     x = linear_block(params, v)
+    if params.orders.degree > 1:  # curved branches (`Orders.degree`)
+        return Signals(v, x, general_backlash(params, x))
     return Signals(v, x, backlash(params, x))
 
 

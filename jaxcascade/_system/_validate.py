@@ -30,13 +30,28 @@ def is_traced(value) -> bool:
     return isinstance(value, jax.core.Tracer)
 
 
-def record(u, y=None, *, orders: Orders | None = None, where: str = "the record", cast=True):
+# The estimators that fit curved backlash branches (`Orders.degree > 1`), for the message
+# of the others.
+CURVED_ESTIMATORS = "literal (the key-term iteration), robust or pem"
+
+
+def record(
+    u,
+    y=None,
+    *,
+    orders: Orders | None = None,
+    where: str = "the record",
+    cast=True,
+    curved: bool = False,
+):
     """`(u, y)` checked and converted to JAX arrays (`y` is `None` when not given).
 
     - `u`, `y`: one record each, 1-D, real (floats or integers), of equal length; finite
       and with `|value| <= MAX_MAGNITUDE` when concrete.
     - `orders`: the record must hold at least `orders.min_samples` samples.
     - `where`: the entry point, for the message (e.g. `"voros"`).
+    - `curved`: whether the entry point fits curved backlash branches; where not, orders
+      of branch degree > 1 (`Orders.degree`) are refused.
     - `cast`: `True` converts to the default float dtype (`jnp.result_type(float)`:
       float64 with x64 enabled), what the estimators compute in; `False` keeps a float
       dtype (the simulator's output follows its input's) and converts integers only.
@@ -45,6 +60,12 @@ def record(u, y=None, *, orders: Orders | None = None, where: str = "the record"
         raise TypeError(
             f"{where}: orders must be an Orders, e.g. Orders(2, 2, 2, 2) or "
             f"Orders.parse('2,2,2,2'), got {type(orders).__name__} {orders!r}."
+        )
+    if orders is not None and orders.degree > 1 and not curved:
+        raise ValueError(
+            f"{where}: orders {orders} have curved backlash branches (degree "
+            f"{orders.degree}) and {where} fits the straight backlash of the 2016 paper; "
+            f"use degree 1, or {CURVED_ESTIMATORS} for the general backlash."
         )
     lost = []  # the float64 arrays computed in float32 (float64 off): one warning
     u = _array(u, "u", where, cast, lost)
