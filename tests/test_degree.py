@@ -171,3 +171,22 @@ def test_a_sweep_of_curved_branches_chunks_and_resumes_to_the_same_table(tmp_pat
     monkeypatch.undo()
     resumed = without_timing(run(spec, out, progress=False))
     pd.testing.assert_frame_equal(resumed, table, check_exact=True)
+
+
+def test_a_spec_names_the_general_backlash_examples():
+    from jaxcascade._cli import build_parser
+    from jaxcascade._montecarlo._spec import Spec
+
+    spec = Spec(example="general1", n=(800,))
+    params, ex = curved("general1", 3)
+    assert spec.orders == params.orders and spec.snr == (ex.snr,)
+    assert spec.true_values() == params.to_dict()
+    assert Spec.from_dict(spec.to_dict()) == spec
+    assert spec.cell_identity(spec.cells()[0]) != Spec(example=1, n=(800,)).cell_identity(
+        Spec(example=1, n=(800,)).cells()[0]
+    )
+    with pytest.raises(ValueError, match="general1 and general2"):
+        Spec(example="general3", n=(800,))
+    args = build_parser().parse_args(["sweep", "--example", "general2", "--n", "800"])
+    assert args.example == "general2"
+    assert build_parser().parse_args(["sweep", "--example", "1"]).example == 1

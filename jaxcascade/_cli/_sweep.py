@@ -250,7 +250,12 @@ def add_parser(subparsers) -> None:
         ),
     )
     parser.add_argument("spec", nargs="?", help="TOML spec file (see jaxcascade.Spec)")
-    parser.add_argument("--example", type=int, help="paper example, 1 or 2")
+    parser.add_argument(
+        "--example",
+        type=_example,
+        help="paper example, 1 or 2, or general1 / general2 (the general backlash's, curved "
+        "branches of degree 3: estimators literal, robust, pem)",
+    )
     parser.add_argument(
         "--system",
         choices=FAMILIES,
@@ -330,3 +335,8 @@ def add_parser(subparsers) -> None:
         "RMSE and std versus SNR and N)",
     )
     parser.set_defaults(func=sweep)
+
+
+def _example(text: str) -> int | str:
+    """`--example`: a paper example's number, or a general-backlash example's name."""
+    return int(text) if text.strip().lstrip("-").isdigit() else text.strip()

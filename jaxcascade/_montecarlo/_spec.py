@@ -10,7 +10,8 @@ starts; a true breakpoint outside the interval the input covers is a warning
 
 TOML layout (every key optional except the system):
 
-    example = 1                      # or a [system] table, or system = "random"
+    example = 1                      # or "general1" / "general2" (curved branches),
+                                     # or a [system] table, or system = "random"
     n = [500, 1000, 4000]
     snr = [10, 25, 50]               # sqrt(var y / var e); inf = noise-free
     realisations = 500
@@ -71,7 +72,8 @@ from .._estimator import estimator
 from .._experiment._changing import Change, trajectory
 from .._experiment._disturbance import NOISES, Disturbance, disturbance
 from .._experiment._inputs import INPUTS, InputDesign, input_design
-from .._system._examples import EXAMPLES
+from .._system._examples import EXAMPLES as PAPER_EXAMPLES
+from .._system._general_backlash import GENERAL_EXAMPLES
 from .._system._model import CascadeParams, Orders
 
 INPUT_KINDS = tuple(INPUTS)
@@ -96,6 +98,13 @@ _TOP_LEVEL = (
     "workers",
     "scheduler",
 )
+
+# The systems a spec's `example` names: the paper's (1, 2) and the general backlash's
+# ("general1", "general2": curved branches, `Orders.degree` 3; docs/general_backlash.md).
+EXAMPLES = {
+    **PAPER_EXAMPLES,
+    **{name: ex.example() for name, ex in GENERAL_EXAMPLES.items()},
+}
 
 
 class InputRangeWarning(UserWarning):
@@ -183,7 +192,8 @@ def _change_identity(change: Change) -> dict:
 class Spec:
     """A Monte-Carlo experiment: one system, a grid `n x snr x estimators`, realisations.
 
-    - `example`: paper example number (1 or 2), or `None` when `params` is given.
+    - `example`: paper example number (1 or 2), a general-backlash example (`"general1"`,
+      `"general2"`: curved branches of degree 3), or `None` when `params` is given.
     - `params`: explicit true values `{name: value}`; `orders` (an `Orders` or
       `"nR,nL,r,p"`) defaults to the orders implied by the names.
     - `family`: `"random"`, the random-system prior of `_prior.random_system` (with
@@ -220,7 +230,7 @@ class Spec:
       on it; its `every` (the spacing of the recorded trajectory) defaults to 10.
     """
 
-    example: int | None = None
+    example: int | str | None = None
     params: Mapping[str, float] | None = None
     family: str | None = None
     orders: Orders | str | None = None
@@ -261,7 +271,8 @@ class Spec:
             if isinstance(self.example, bool) or self.example not in EXAMPLES:
                 raise ValueError(
                     f"Unknown example {self.example!r}; the paper has examples "
-                    f"{' and '.join(map(str, EXAMPLES))}."
+                    f"{' and '.join(map(str, PAPER_EXAMPLES))}, the general backlash "
+                    f"{' and '.join(GENERAL_EXAMPLES)}."
                 )
             ex = EXAMPLES[self.example]
             orders = Orders.parse(self.orders) if isinstance(self.orders, str) else self.orders
@@ -437,6 +448,8 @@ class Spec:
         """Label of the system in tables: `example1`, `example2`, `custom` or the family."""
         if self.family is not None:
             return self.family
+        if isinstance(self.example, str):
+            return self.example
         return f"example{self.example}" if self.example is not None else "custom"
 
     def truth(self, dtype=None) -> CascadeParams:

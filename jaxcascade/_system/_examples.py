@@ -11,9 +11,11 @@ from ._model import CascadeParams, Orders
 
 @dataclasses.dataclass(frozen=True)
 class Example:
-    """A paper example: true parameters and the identification experiment."""
+    """A paper example: true parameters and the identification experiment. `number`: 1
+    or 2, or the name of a general-backlash example (`_general_backlash.GeneralExample.
+    example`)."""
 
-    number: int
+    number: int | str
     values: dict
     n_samples: int
     snr: float = 25.0

@@ -31,6 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from ._examples import Example
 from ._model import CascadeParams, Orders
 from ._simulate import (  # the branches' simulation, shared with `signals` at degree > 1
     Signals,
@@ -265,6 +266,21 @@ class GeneralExample:
         p = self.params(dtype)
         curves = (jnp.asarray(c, p.mR.dtype) for c in (self.curveL, self.curveR))
         return GeneralBacklash(p.cL, p.mR, p.cR, *curves)
+
+    @property
+    def degree(self) -> int:
+        return len(self.curveL) + 1
+
+    def example(self) -> Example:
+        """The example as a paper example is held (`_examples.Example`, what a sweep's
+        `example = "general1"` runs): orders with the branch degree (`Orders.degree`),
+        the values with the curvature terms."""
+        o = self.orders
+        values = dict(self.values)
+        values.update({f"mL{i + 2}": float(c) for i, c in enumerate(self.curveL)})
+        values.update({f"mR{i + 2}": float(c) for i, c in enumerate(self.curveR)})
+        orders = Orders(o.nR, o.nL, o.r, o.p, self.degree)
+        return Example(self.name, values, self.n_samples, self.snr, self.amplitude, orders)
 
 
 def _example1_values() -> dict:
