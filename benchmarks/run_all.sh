@@ -159,6 +159,10 @@ general() {  # issue 39: the general-backlash examples' branches on their record
         --n 1000,4000 --records 50 --seed 0 --out results/general_backlash/study
     python benchmarks/general_backlash_study.py --examples general1,general2 --snr 25 \
         --n 4000 --noise ar:0.8 --records 50 --seed 0 --out results/general_backlash/study_coloured
+    # the branch degree in the orders: general1 through the Monte-Carlo engine, batched
+    jaxcascade sweep --example general1 --snr 25 --n 4000 --realisations 50 \
+        --estimator literal,robust,pem --seed 0 --chunk-size 25 \
+        --out results/general_backlash/sweep_general1.parquet --overwrite
     # the loop's general_backlash effect on curved and straight records
     python benchmarks/general_backlash_loop.py --seeds 10 --out results/general_backlash/loop
 }
