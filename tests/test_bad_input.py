@@ -386,6 +386,19 @@ def test_orders_beyond_the_limits_fail_at_parse_time(capsys, tmp_path, command, 
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.parametrize("command", ["fit", "loop"])
+def test_a_branch_degree_in_a_straight_command_is_one_line(capsys, tmp_path, command):
+    # fit and loop declare the straight backlash: a fifth number (the branch degree,
+    # which sweeps take) is refused before any file is read
+    argv = {
+        "fit": ["fit", "data.csv", "--input", "u", "--output", "y"],
+        "loop": ["loop", "data.csv", "--validate", "v.csv", "--input", "u", "--output", "y"],
+    }[command]
+    err = _one_line_error(capsys, [*argv, "--orders=2,2,2,2,3"])
+    assert f"jaxcascade {command} declares the straight backlash" in err and "sweep" in err
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_too_few_samples_per_parameter_is_refused_up_front(capsys, tmp_path):
     rng = np.random.default_rng(3)
     path = _csv(tmp_path / "short.csv", u=rng.uniform(-2, 2, N), y=rng.standard_normal(N))

@@ -172,6 +172,19 @@ def test_a_sweep_of_curved_branches_chunks_and_resumes_to_the_same_table(tmp_pat
     resumed = without_timing(run(spec, out, progress=False))
     pd.testing.assert_frame_equal(resumed, table, check_exact=True)
 
+    # a chunk as a Dask worker runs it: the spec pickled, the task in the caller's dtype
+    import pickle
+
+    from jaxcascade._montecarlo._distributed import chunk_task
+
+    dtype, _, rows = chunk_task(
+        pickle.loads(pickle.dumps(spec)), spec.cells()[0], [3, 4, 5], "float64"
+    )
+    rows = without_timing(rows).reset_index(drop=True)
+    expected = table[table["realisation"] >= 3].reset_index(drop=True)
+    assert dtype == "float64"
+    pd.testing.assert_frame_equal(rows, expected, check_exact=True)
+
 
 def test_a_spec_names_the_general_backlash_examples():
     from jaxcascade._cli import build_parser

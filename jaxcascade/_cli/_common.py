@@ -138,14 +138,23 @@ def record_options(args) -> dict:
     )
 
 
-def parse_orders(text: str):
-    """`--orders nR,nL,r,p` as `Orders`, or a CLIError naming the option."""
+def parse_orders(text: str, command: str | None = None):
+    """`--orders nR,nL,r,p` as `Orders`, or a CLIError naming the option. `command`: a
+    command that declares the straight backlash only (`fit`, `loop`), which refuses a
+    fifth number (the branch degree) in one sentence."""
     from .._system._model import Orders
 
     try:
-        return Orders.parse(text)
+        orders = Orders.parse(text)
     except ValueError as error:
         raise CLIError(f"--orders: {error}") from None
+    if command is not None and orders.degree > 1:
+        raise CLIError(
+            f"--orders: jaxcascade {command} declares the straight backlash, four numbers "
+            f"nR,nL,r,p, got {text!r}; curved branches are the loop's effect "
+            "general_backlash, and jaxcascade sweep fits them (literal, robust, pem)."
+        )
+    return orders
 
 
 def number_list(kind, option: str):

@@ -85,7 +85,7 @@ def run_fit(args) -> int:
     from .._metrics import fit_percent
     from .._status import Status
 
-    orders = parse_orders(args.orders)
+    orders = parse_orders(args.orders, "fit")
     if args.decimate < 1:
         raise CLIError(f"--decimate must be an integer >= 1, got {args.decimate}.")
     estimator(args.estimator)  # unknown names fail here, before reading data

@@ -383,7 +383,7 @@ def _run_loop(args, checkpoints) -> int:
     from .._plot._loop import plot_compare
     from .._plot._residuals import save_residual_figures
 
-    orders = parse_orders(args.orders)
+    orders = parse_orders(args.orders, "loop")
     if args.max_effects < 0:
         raise CLIError(f"--max-effects must be >= 0, got {args.max_effects}.")
     if args.decimate < 1:
