@@ -200,6 +200,18 @@ def test_a_spec_names_the_general_backlash_examples():
     )
     with pytest.raises(ValueError, match="general1 and general2"):
         Spec(example="general3", n=(800,))
+    with pytest.raises(ValueError, match="family draws straight backlash branches"):
+        Spec(family="random", orders="2,2,2,2,3", n=(800,))
     args = build_parser().parse_args(["sweep", "--example", "general2", "--n", "800"])
     assert args.example == "general2"
     assert build_parser().parse_args(["sweep", "--example", "1"]).example == 1
+
+
+def test_the_loop_refuses_declared_curved_branches_in_one_sentence():
+    from jaxcascade._measured._loop import model_error_loop
+
+    params, _ = curved()
+    u = uniform_input(jax.random.PRNGKey(0), 1000)
+    y = simulate(params, u)
+    with pytest.raises(ValueError, match="declares the straight backlash .* general_backlash"):
+        model_error_loop(u, y, u, y, params.orders)

@@ -908,7 +908,14 @@ MIN_SCORED = 20
 def check_lengths(lengths: list[int], orders: Orders, where: str = "the loop") -> None:
     """The estimation records' lengths: together at least `orders.min_samples` (10 per
     parameter, counted over every estimation record), each longer than the linear
-    block's lags; a one-sentence `ValueError` otherwise."""
+    block's lags; a one-sentence `ValueError` otherwise (also for orders with a branch
+    degree: the loop declares the straight backlash and adds curved branches itself)."""
+    if orders.degree > 1:
+        raise ValueError(
+            f"{where}: orders {orders} have a branch degree; the loop declares the straight "
+            "backlash (four orders) and adds curved branches itself where the residual "
+            "asks for them (its effect general_backlash)."
+        )
     total = sum(lengths)
     if total < orders.min_samples:
         which = (

@@ -263,6 +263,12 @@ class Spec:
                     f"Unknown system family {self.family!r}; known: {', '.join(FAMILIES)}."
                 )
             orders = Orders.parse(self.orders) if isinstance(self.orders, str) else self.orders
+            if orders is not None and orders.degree > 1:
+                raise ValueError(
+                    f"The {self.family!r} family draws straight backlash branches; orders "
+                    f"{orders} have a branch degree: give explicit params (with the "
+                    "curvature terms) or example 'general1' / 'general2'."
+                )
             set_(self, "orders", orders if orders is not None else Orders())
             defaults = _FAMILY_DEFAULTS[self.family]
             set_(self, "n", self.n if self.n is not None else defaults["n"])
