@@ -152,7 +152,7 @@ def parse_orders(text: str, command: str | None = None):
         raise CLIError(
             f"--orders: jaxcascade {command} declares the straight backlash, four numbers "
             f"nR,nL,r,p, got {text!r}; curved branches are the loop's effect "
-            "general_backlash, and jaxcascade sweep fits them (literal, robust, pem)."
+            "general_backlash, and jaxcascade sweep fits them."
         )
     return orders
 

@@ -254,7 +254,7 @@ def add_parser(subparsers) -> None:
         "--example",
         type=_example,
         help="paper example, 1 or 2, or general1 / general2 (the general backlash's, curved "
-        "branches of degree 3: estimators literal, robust, pem)",
+        "branches of degree 3)",
     )
     parser.add_argument(
         "--system",

@@ -54,6 +54,8 @@ def initial_guess(orders: Orders, u_min, u_max, dtype=None) -> CascadeParams:
         mR=jnp.asarray(0.5, dtype),
         cR=jnp.asarray(0.001, dtype),
         orders=o,
+        curveL=jnp.zeros((o.degree - 1,), dtype),  # straight branches (curvature 0)
+        curveR=jnp.zeros((o.degree - 1,), dtype),
     )
 
 

@@ -13,6 +13,10 @@ using the known recursive least-squares algorithm". Here each sample t
    `yc(t) - phi(t) theta`, each of the regression's two blocks (the g1 and the g2
    columns, disjoint in time) where it is active.
 
+**Curved branches** (`Orders.degree > 1`, the general output backlash): the regressor
+gains the curvature's columns (`_regression.regression`), the left branch's in the g1
+block, the right's in the g2 block (`_blocks`); everything else is the same.
+
 **Breakpoints as `D M`.** Eq. 17's breakpoint columns are `-M_i h(D_{i-1} - u(t-1))`
 with coefficient `D_{i-1}`. In a recursion that column vanishes whenever the running
 estimate of a slope increment passes near 0, and the breakpoint then drifts with
@@ -263,7 +267,7 @@ def recursive(
     status says it happened). `Recursion` carries the figures the status was read
     from.
     """
-    u, y = record(u, y, orders=orders, where="recursive")
+    u, y = record(u, y, orders=orders, where="recursive", curved=True)
     if init is not None and not isinstance(init, CascadeParams):
         raise TypeError(f"recursive: init must be CascadeParams, got {type(init).__name__}.")
     check_settings(
@@ -367,14 +371,16 @@ def check_settings(
 def _vector(theta, orders):
     """theta (eq. 18, ending in `C = cR mR`) -> `Orders.names` order, without dividing by
     zero (a zero `mR` gives a non-finite `cR`, which `finite` turns into a status)."""
-    mR = theta[-2]
-    return theta.at[-1].set(theta[-1] / mR)
+    k = orders.straight_size - 1  # C (the last entry at degree 1)
+    mR = theta[k - 1]
+    return theta.at[k].set(theta[k] / mR)
 
 
 def _params(theta, orders):
-    mR = theta[-2]
+    k = orders.straight_size - 1  # C (the last entry at degree 1)
+    mR = theta[k - 1]
     safe = jnp.where(mR != 0, mR, jnp.finfo(theta.dtype).eps)
-    return CascadeParams.from_vector(theta.at[-1].set(theta[-1] / safe), orders, check=False)
+    return CascadeParams.from_vector(theta.at[k].set(theta[k] / safe), orders, check=False)
 
 
 def _after_first(theta, init_theta, orders):
@@ -382,7 +388,7 @@ def _after_first(theta, init_theta, orders):
     slope keeps the initial breakpoint), the backlash at its initial values."""
     o = orders
     s = o.slices
-    out = jnp.concatenate([theta[o.static_dynamic], init_theta[o.backlash]])
+    out = jnp.concatenate([theta[o.static_dynamic], init_theta[o.static_dynamic.stop :]])
     for D, M in (("DR", "MR"), ("DL", "ML")):
         DM, slope = out[s[D]], out[s[M]][1:]
         ok = (slope != 0) & jnp.isfinite(DM / jnp.where(slope != 0, slope, 1.0))
@@ -422,6 +428,39 @@ def _hold_breakpoints(proposal, proposed_D, held_at, init_theta, orders, u_min, 
             jnp.where(ok, d, jnp.where(slope != 0, held, init_theta[s[name]]))
         )
     return out, out_D
+
+
+def _blocks(orders):
+    """`(block1, block2, join, covariance)`: the regression's two blocks, the columns
+    that carry g1 (NS, LD, `cL` and the left branch's curvature `mL2..mLq`) and those
+    that carry g2 (`mR`, `C` and `mR2..mRq`), taken from a vector in theta order, put
+    back together, and their covariances as one matrix in theta order. At degree 1 they
+    are the vector's first `g1_columns` entries and the last two."""
+    b1, q1, size = orders.g1_columns, orders.degree - 1, orders.size
+    if q1 == 0:
+        return (
+            lambda v: v[:b1],
+            lambda v: v[b1:],
+            lambda a, b: jnp.concatenate([a, b]),
+            jax.scipy.linalg.block_diag,
+        )
+    straight = orders.straight_size
+    first = jnp.asarray(list(range(b1)) + list(range(straight, straight + q1)))
+    second = jnp.asarray([b1, b1 + 1] + list(range(straight + q1, size)))
+
+    def join(a, b):
+        return jnp.zeros((size,), a.dtype).at[first].set(a).at[second].set(b)
+
+    def covariance(P1, P2):
+        P = jnp.zeros((size, size), P1.dtype)
+        return (
+            P.at[first[:, None], first[None, :]]
+            .set(P1)
+            .at[second[:, None], second[None, :]]
+            .set(P2)
+        )
+
+    return (lambda v: v[first], lambda v: v[second], join, covariance)
 
 
 def _multiply_breakpoints(theta, orders):
@@ -486,7 +525,8 @@ def _recursive(
     # and backlash (`_regression.regression(..., unit_slopes=True)`)
     first_params = _unit_slopes(init)
     W = window(o)
-    b1 = o.g1_columns
+    block1, block2, join, covariance = _blocks(o)
+    n1, n2 = o.g1_columns + o.degree - 1, 2 + o.degree - 1
     total = passes * T
     # the status's window: the last `settle_window` samples (fewer when the record after
     # the first iteration is shorter)
@@ -501,7 +541,7 @@ def _recursive(
         # the end of the first iteration: its NS and LD estimates and their information
         # stay (breakpoints outside the range back at their initial values), the
         # backlash restarts at its initial values
-        kept = jnp.concatenate([theta[o.static_dynamic], init_theta[o.backlash]])
+        kept = jnp.concatenate([theta[o.static_dynamic], init_theta[o.static_dynamic.stop :]])
         return _hold_breakpoints(kept, model(kept), init_theta, init_theta, o, u_min, u_max)[0]
 
     def step(carry, inputs):
@@ -513,14 +553,14 @@ def _recursive(
         # (`switch` does not depend on the record: a real branch under `vmap`)
         theta = jax.lax.cond(switch, at_switch, lambda theta: theta, theta)
         mark = jnp.where(k == window_start, theta, mark)  # the estimate the window starts at
-        P2 = jnp.where(switch, delta * jnp.eye(2, dtype=dtype), P2)
+        P2 = jnp.where(switch, delta * jnp.eye(n2, dtype=dtype), P2)
         x_past = jnp.where(switch, y_past, x_past)
         # a new pass starts from rest, as the record does
         restart = (t == 0) & (k > 0)
         u_past, y_past, x_past = (jnp.where(restart, 0.0, z) for z in (u_past, y_past, x_past))
         if gradient:
             Pf, S = extra
-            Pf = jnp.where(switch, jax.scipy.linalg.block_diag(P1, P2), Pf)
+            Pf = jnp.where(switch, covariance(P1, P2), Pf)
             S = jnp.where(switch | restart, 0.0, S)
 
         current_D = model(theta)
@@ -545,9 +585,9 @@ def _recursive(
         lam_k = forgetting(k - first_samples, lam, memory0, growth, acceleration)
         lam_k = jnp.where(first, 1.0, lam_k)
         new1, new_P1 = update(
-            theta[:b1],
+            block1(theta),
             P1,
-            phi[:b1],
+            block1(phi),
             error,
             lam_k,
             valid & (g1 > 0),
@@ -555,16 +595,16 @@ def _recursive(
             trace_max=trace_max,
         )
         new2, new_P2 = update(
-            theta[b1:],
+            block2(theta),
             P2,
-            phi[b1:],
+            block2(phi),
             error,
             lam_k,
             valid & (g2 > 0),
             anti_windup=anti_windup,
             trace_max=trace_max,
         )
-        proposal = jnp.concatenate([new1, new2])
+        proposal = join(new1, new2)
         if gradient:
 
             def predict(theta_, x_past_):
@@ -637,8 +677,8 @@ def _recursive(
     zeros = jnp.zeros((W - 1,), dtype)
     carry = (
         _multiply_breakpoints(init_theta, o),
-        delta * jnp.eye(b1, dtype=dtype),
-        delta * jnp.eye(2, dtype=dtype),
+        delta * jnp.eye(n1, dtype=dtype),
+        delta * jnp.eye(n2, dtype=dtype),
         zeros,
         zeros,
         zeros,
@@ -678,7 +718,7 @@ def _recursive(
     error_out = error_all[-T:] if errors else jnp.zeros((0,), dtype)
 
     theta, P1, P2, sq, mark = carry[0], carry[1], carry[2], carry[7], carry[8]
-    P = carry[6][0] if gradient else jax.scipy.linalg.block_diag(P1, P2)
+    P = carry[6][0] if gradient else covariance(P1, P2)
     check = _settling(
         theta,
         mark,
@@ -856,7 +896,7 @@ class Recursive(Estimator):
         input_range: tuple[float, float] | None = None,
     ) -> Solution:
         del key  # deterministic
-        u, y = record(u, y, orders=orders, where="Recursive")
+        u, y = record(u, y, orders=orders, where="Recursive", curved=True)
         if input_range is not None and not any(is_traced(b) for b in input_range):
             if not float(input_range[0]) < 0 < float(input_range[1]):
                 raise ValueError(

@@ -10,7 +10,7 @@ from jaxtyping import Array, Float
 
 from .. import _linalg
 from .._system._model import CascadeParams
-from .._system._simulate import backlash_switches, heaviside, shift
+from .._system._simulate import backlash_switches, general_switches, heaviside, shift
 
 
 class Regression(NamedTuple):
@@ -48,16 +48,31 @@ def regression(
     - `unit_slopes`: use M = 1 inside f1, f2. With the paper's all-zero initial slopes
       the breakpoint regressors `-f` vanish identically; with unit slopes the breakpoint
       column's coefficient is `D * M` instead of `D` (`_estimator._literal`).
+
+    At branch degree `q > 1` (`Orders.degree`) the switches are the general backlash's
+    and the curvature's columns follow (the recursive estimator's regressor).
     """
     dtype = u.dtype
     y_prev = shift(y, 1)
-    g1, g2 = backlash_switches(
-        x, y_prev, params.cL.astype(dtype), params.mR.astype(dtype), params.cR.astype(dtype)
-    )
+    degree = params.orders.degree
+    if degree > 1:  # curved branches: the general backlash's switches
+        g1, g2 = general_switches(params, x, y_prev)
+    else:
+        g1, g2 = backlash_switches(
+            x, y_prev, params.cL.astype(dtype), params.mR.astype(dtype), params.cR.astype(dtype)
+        )
     yc = y - y_prev * (1 - g1) * (1 - g2)
     ns_ld = key_term_columns(params, u, v, x, unit_slopes=unit_slopes) * g1[None, :]
-    backlash = jnp.stack([g1, x * g2, -g2])
-    phi = jnp.concatenate([ns_ld, backlash], axis=0).T
+    rows = [ns_ld, jnp.stack([g1, x * g2, -g2])]
+    if degree > 1:
+        # the curvature's columns `g1 (x + cL)^i`, `g2 (x - cR)^i`, i = 2..q
+        # (`_general_keyterm.general_regression`), after the straight ones, as in theta
+        cL, cR = params.cL.astype(dtype), params.cR.astype(dtype)
+        powers = range(2, degree + 1)
+        rows.append(
+            jnp.stack([g1 * (x + cL) ** i for i in powers] + [g2 * (x - cR) ** i for i in powers])
+        )
+    phi = jnp.concatenate(rows, axis=0).T
     return Regression(phi, yc, g1, g2)
 
 

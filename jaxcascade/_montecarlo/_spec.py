@@ -37,7 +37,7 @@ TOML layout (every key optional except the system):
     [system]                         # instead of `example`
     orders = "2,2,2,2"               # optional, inferred from the names; a fifth
                                      # number is the backlash branches' degree (with
-                                     # mL2.., mR2.. among the params; literal, robust)
+                                     # mL2.., mR2.. among the params)
     params = { MR1 = 1.2, MR2 = -1.4, DR1 = 1.0, ... }
 
     [system]                         # or: the random family (`_prior.random_system`)

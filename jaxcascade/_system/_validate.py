@@ -32,7 +32,7 @@ def is_traced(value) -> bool:
 
 # The estimators that fit curved backlash branches (`Orders.degree > 1`), for the message
 # of the others.
-CURVED_ESTIMATORS = "literal (the key-term iteration), robust or pem"
+CURVED_ESTIMATORS = "the registered estimators (Literal, Robust, Pem, Recursive)"
 
 
 def record(
