@@ -57,6 +57,7 @@ from ._general_refine import (
     rising,
     robust_general,
     unpack,
+    with_curvature,
 )
 from ._refine import least_squares
 from ._robust import DEFAULTS as ROBUST
@@ -212,9 +213,8 @@ def curved_pem_solution(
     status = jnp.where((status == Status.converged) & ~rising(curved, x), Status.failed, status)
     usable = (start.status == Status.converged) | (start.status == Status.cycled)
     status = jnp.where(usable, status, start.status).astype(jnp.int32)
-    vector = jnp.concatenate([params.to_vector(), curved.curveL, curved.curveR]).astype(dtype)
-    estimate = CascadeParams.from_vector(vector, orders, check=False)
-    history = jnp.stack([start.history[0], start.params.to_vector(), vector])
+    estimate = with_curvature(params, curved, orders)
+    history = jnp.stack([start.history[0], start.params.to_vector(), estimate.to_vector()])
     solution = Solution(
         params=estimate,
         history=history,

@@ -158,6 +158,13 @@ def fit_traced(residual, z0, max_steps: int, rtol, atol):
     )
 
 
+def with_curvature(cascade: CascadeParams, nd: GeneralBacklash, orders) -> CascadeParams:
+    """`cascade` (straight orders, its `cL`, `mR`, `cR` the block's) with `nd`'s
+    curvature, as parameters of `orders` (`Orders.degree > 1`). Traceable."""
+    vector = jnp.concatenate([cascade.to_vector(), nd.curveL, nd.curveR])
+    return CascadeParams.from_vector(vector.astype(cascade.mR.dtype), orders, check=False)
+
+
 def _error(z, *, orders, u, y):
     """The simulation error of the unconstrained vector `z` (`packed`) for `orders`."""
     params, curved = unpack(z, orders.straight, orders.degree, u)
@@ -194,12 +201,9 @@ def curved_solution(u, y, orders, key=None, *, steps=200, rtol=1e-10, atol=1e-12
         (status == Status.converged) & ~rising(curved, x), Status.failed, status
     ).astype(jnp.int32)
 
-    def full(cascade, nd):
-        vector = jnp.concatenate([cascade.to_vector(), nd.curveL, nd.curveR])
-        return CascadeParams.from_vector(vector.astype(u.dtype), orders, check=False)
-
-    estimate = full(params, curved)
-    history = jnp.stack([full(straight.params, start).to_vector(), estimate.to_vector()])
+    estimate = with_curvature(params, curved, orders)
+    first = with_curvature(straight.params, start, orders)
+    history = jnp.stack([first.to_vector(), estimate.to_vector()])
     solution = Solution(
         params=estimate,
         history=history,
