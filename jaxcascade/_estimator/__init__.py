@@ -18,7 +18,10 @@ from __future__ import annotations
 import inspect
 from typing import Any
 
-from ._base import Estimator
+from ._base import CURVED_FORMS, Estimator
+from ._general_keyterm import key_term_solution
+from ._general_pem import curved_pem_solution
+from ._general_refine import curved_solution
 from ._host import HostEstimator, HostFit
 from ._literal import Literal
 from ._pem import Pem
@@ -29,6 +32,9 @@ from ._solution import Solution, solution_table
 ESTIMATORS: dict[str, type[Estimator] | HostEstimator] = {
     cls.name: cls for cls in (Literal, Robust, Pem, Recursive)
 }
+# their forms for curved backlash branches (`_base.CURVED_FORMS`; `recursive` takes them
+# in its own regression)
+CURVED_FORMS.update(literal=key_term_solution, robust=curved_solution, pem=curved_pem_solution)
 # the package's own, in `ESTIMATORS`' order (`_names.ESTIMATORS` lists them for --help)
 BUILTIN = tuple(ESTIMATORS)
 ENTRY_POINT_GROUP = "jaxcascade.estimators"

@@ -6,6 +6,7 @@ import abc
 import dataclasses
 import inspect
 import typing
+from collections.abc import Callable
 from typing import Any, ClassVar
 
 import equinox as eqx
@@ -13,6 +14,18 @@ from jaxtyping import Array, Float, PRNGKeyArray
 
 from .._system._model import Orders
 from ._solution import Solution
+
+# The registered estimators' forms for curved backlash branches (`Orders.degree > 1`), by
+# estimator name: `form(u, y, orders, key, **settings) -> Solution`, traceable. The general
+# backlash's estimators build on the straight ones, so their modules sit above them; the
+# package's `__init__` enters them here, and a straight estimator's `__call__` looks its
+# curved form up (`curved_form`) instead of importing upwards.
+CURVED_FORMS: dict[str, Callable[..., Solution]] = {}
+
+
+def curved_form(name: str) -> Callable[..., Solution]:
+    """The curved-branch form of the registered estimator `name` (`CURVED_FORMS`)."""
+    return CURVED_FORMS[name]
 
 
 class Estimator(eqx.Module):

@@ -180,14 +180,16 @@ def key_term_general(
     return _iterate(u, y, orders, int(degree), int(max_iterations), settings)
 
 
-def key_term_solution(u, y, orders: Orders, **settings) -> Solution:
+def key_term_solution(u, y, orders: Orders, key=None, **settings) -> Solution:
     """The key-term iteration as the `literal` estimator's answer where `orders` have
     curved branches (`Orders.degree > 1`): a `Solution` of those orders (the estimate's
     vector is `to_vector`'s, theta's `C` turned back into `cR`; the history's rows after
     `iterations` repeat the estimate, as `voros`'s do). Traceable and `vmap`-able (the
     record is checked by the caller). `settings`: `voros`'s stopping settings
     `max_iterations`, `tol`, `se_tol`, `cost_tol`, `cycle_period`, `divergence_bound`;
-    the iteration starts from the paper's initial values on the record's own range."""
+    the iteration starts from the paper's initial values on the record's own range.
+    `key` is not used (the iteration is deterministic)."""
+    del key
     keys = ("tol", "se_tol", "cost_tol", "cycle_period", "divergence_bound")
     values = (settings[k] for k in keys)
     tol, se_tol, cost_tol, cycle_period, divergence_bound = values

@@ -31,6 +31,7 @@ from .._system._simulate import linear_block, pwl
 from .._system._validate import record
 from ._levenberg import levenberg_marquardt
 from ._refine import from_unconstrained, least_squares, to_unconstrained
+from ._robust import Robust, _robust
 from ._solution import Solution, finite
 
 
@@ -128,8 +129,6 @@ def robust_general(u, y, orders, degree: int, *, key=None, **settings) -> Genera
     robust estimator's straight-backlash fit (`Robust`, with `settings`), then
     `refine_general` from it with straight branches (curvature 0), the paper's initial
     values for the curvature."""
-    from ._robust import Robust
-
     u, y = record(u, y, orders=orders, where="robust_general")
     straight = Robust(**settings)(u, y, orders, key=key).params
     return refine_general(straight, GeneralBacklash.straight(straight, degree), u, y)
@@ -188,8 +187,6 @@ def curved_solution(u, y, orders, key=None, *, steps=200, rtol=1e-10, atol=1e-12
     curved fit's, `failed` where it converged to branches that do not rise on the fitted
     range of x (`rising`). The history's rows: the straight estimate (no curvature), the
     curved one."""
-    from ._robust import _robust
-
     straight = _robust(u, y, orders.straight, key, **settings)
     start = GeneralBacklash.straight(straight.params, orders.degree)
     residual = functools.partial(_error, orders=orders, u=u, y=y)

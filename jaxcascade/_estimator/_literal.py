@@ -15,7 +15,7 @@ from .._compile import jit
 from .._status import Status
 from .._system._model import CascadeParams, Orders, is_admissible
 from .._system._validate import is_traced, record
-from ._base import Estimator, keyword_defaults, setting
+from ._base import Estimator, curved_form, keyword_defaults, setting
 from ._normal_equations import (
     FIRST_STEPS,
     from_regression,
@@ -449,9 +449,7 @@ class Literal(Estimator):
         u, y = record(u, y, orders=orders, where="Literal", curved=True)
         if orders.degree > 1:
             # curved branches: the key-term iteration of the general backlash
-            from ._general_keyterm import key_term_solution
-
-            return key_term_solution(u, y, orders, **self.stopping())
+            return curved_form(self.name)(u, y, orders, None, **self.stopping())
         if input_range is None:
             u_min, u_max = jnp.min(u), jnp.max(u)
         else:

@@ -61,7 +61,7 @@ from .._experiment._noise_filter import (
 from .._status import Status
 from .._system._model import Orders, is_admissible
 from .._system._validate import record
-from ._base import Estimator, keyword_defaults, setting
+from ._base import Estimator, curved_form, keyword_defaults, setting
 from ._basin import claim, off_edge, residual_statistic
 from ._levenberg import levenberg_marquardt
 from ._refine import _chain, from_unconstrained, simulation_error, to_unconstrained
@@ -315,7 +315,5 @@ class Pem(Estimator):
         settings = {name: getattr(self, name) for name in DEFAULTS}
         if orders.degree > 1:
             # curved branches: `pem_general`'s method, traced (`_general_pem`)
-            from ._general_pem import curved_pem_solution
-
-            return curved_pem_solution(u, y, orders, key, **settings)
+            return curved_form(self.name)(u, y, orders, key, **settings)
         return pem(u, y, orders, key, **settings)

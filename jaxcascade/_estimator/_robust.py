@@ -87,7 +87,7 @@ from .._system._model import CascadeParams, Orders, is_admissible
 from .._system._prior import random_systems
 from .._system._validate import record
 from . import _fused
-from ._base import Estimator, keyword_defaults, setting
+from ._base import Estimator, curved_form, keyword_defaults, setting
 from ._basin import claim, residual_statistic
 from ._literal import initial_guess, voros
 from ._refine import refine, simulation_error
@@ -554,7 +554,5 @@ class Robust(Estimator):
         settings = {name: getattr(self, name) for name in DEFAULTS}
         if orders.degree > 1:
             # curved branches: the straight fit, then the curvature (`_general_refine`)
-            from ._general_refine import curved_solution
-
-            return curved_solution(u, y, orders, key, **settings)
+            return curved_form(self.name)(u, y, orders, key, **settings)
         return robust(u, y, orders, key, **settings)
