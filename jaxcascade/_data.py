@@ -24,7 +24,6 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
-import scipy.signal
 
 from . import _defaults
 from ._system._validate import MAX_MAGNITUDE
@@ -941,6 +940,8 @@ def _sample_period(time: np.ndarray | None, given: float | None, where: str) -> 
 
 
 def _decimate(values: np.ndarray, factor: int, anti_alias: str) -> np.ndarray:
+    import scipy.signal  # here, not at the top: it takes a second to import
+
     if anti_alias == "fir":
         taps = scipy.signal.firwin(20 * factor + 1, 1.0 / factor, window="hamming")
         return scipy.signal.resample_poly(values, 1, factor, window=taps, padtype="antireflect")
@@ -1014,6 +1015,8 @@ def _build(
         )
     if detrend != "none":
         # MATLAB's detrend: 'constant' removes the mean, 'linear' the least-squares line
+        import scipy.signal
+
         kind = "constant" if detrend == "mean" else "linear"
         u, y = scipy.signal.detrend(u, type=kind), scipy.signal.detrend(y, type=kind)
     if decimate > 1:
