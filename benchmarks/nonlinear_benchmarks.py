@@ -98,8 +98,26 @@ def _commit() -> str:
         return "unknown"
 
 
-def write_summary(out: pathlib.Path) -> None:
-    """OUT/summary.csv (one row per test set) and OUT/README.md from the finished runs."""
+TITLE = "The model-error loop on the nonlinear benchmarks (default settings)"
+WRITTEN_BY = (
+    "`python benchmarks/nonlinear_benchmarks.py --data ../shared/data/nonlinear_benchmarks`"
+)
+PUBLISHED = (
+    " Published: Champneys et al. (2024), arXiv 2405.10779, the better of its linear "
+    "state-space and linear ARX rows."
+)
+
+
+def write_summary(
+    out: pathlib.Path,
+    why: dict | None = None,
+    title: str = TITLE,
+    written_by: str = WRITTEN_BY,
+    published: str = PUBLISHED,
+) -> None:
+    """OUT/summary.csv (one row per test set) and OUT/README.md from the finished runs;
+    `why` (default `WHY`) says per benchmark why the model class misses a linear figure."""
+    why = WHY if why is None else why
     import pandas as pd
 
     rows, notes = [], []
@@ -150,15 +168,12 @@ def write_summary(out: pathlib.Path) -> None:
     table = pd.DataFrame(rows)
     table.to_csv(out / "summary.csv", index=False)
     lines = [
-        "# The model-error loop on the nonlinear benchmarks (default settings)",
+        f"# {title}",
         "",
-        "Written by `python benchmarks/nonlinear_benchmarks.py --data "
-        "../shared/data/nonlinear_benchmarks` (each run's command, machine, load, date and "
+        f"Written by {written_by} (each run's command, machine, load, date and "
         "commit in `summary.csv` and `NAME/resources.json`; each run's report in `NAME/`).",
         "Test RMSE in the benchmark's unit: free-run simulation, the state set from the "
-        "measured output on the first `n_init` samples, RMSE of `y[n_init:]`. Published: "
-        "Champneys et al. (2024), arXiv 2405.10779, the better of its linear state-space and "
-        "linear ARX rows.",
+        f"measured output on the first `n_init` samples, RMSE of `y[n_init:]`.{published}",
         "",
         "| benchmark | test | unit | final model | declared cascade | ARX peer (this run) | "
         "best linear (published) | below both | effects | s | peak RSS MB | programs |",
@@ -181,7 +196,7 @@ def write_summary(out: pathlib.Path) -> None:
             lines.append(
                 f"- {r['benchmark']} {r['test']}: {r['final_rmse']:.4g} {r['unit']} against "
                 f"the ARX peer's {r['arx_rmse']:.4g} and the best published linear "
-                f"{'-' if best is None else f'{best:.4g}'}: {WHY.get(r['benchmark'], '')}."
+                f"{'-' if best is None else f'{best:.4g}'}: {why.get(r['benchmark'], '')}."
             )
     if notes:
         lines += ["", "Runs that did not finish:", "", *notes]

@@ -140,6 +140,11 @@ nonlinear() {  # issue 32 (needs ../shared/data): the loop on the community's no
     python benchmarks/nonlinear_benchmarks.py --data "${NLB_DATA:-../shared/data/nonlinear_benchmarks}" \
         --out results/nonlinear_benchmarks
 }
+stand_ins() {  # issue 32: the loop on simulated stand-ins for the two benchmarks not shared
+    # (Cascaded_Tanks, WienerHammerBenchMark) in their distributed layouts
+    rm -rf results/nonlinear_benchmarks_stand_ins
+    python benchmarks/stand_in_benchmarks.py --seed 0 --out results/nonlinear_benchmarks_stand_ins
+}
 general_brfd() {  # issue 39, point 5 (needs ../shared/data): the damper's loop, both
     # directions, with the curved backlash among the candidates of results/brfd
     rm -rf results/general_backlash/brfd
@@ -182,7 +187,7 @@ mutations() {  # issue 40: each deleted body (an effect, pem's iteration, robust
     python benchmarks/mutation_check.py --out results/mutation_check
 }
 all=(bench profile bench_robust speed distributed robust sweeps literal efficiency effects_loop loop
-    stability backlash reproduce recursive inputs noise nonlinear statuses general general_brfd
+    stability backlash reproduce recursive inputs noise nonlinear stand_ins statuses general general_brfd
     slow_tests default_tests profile_tests mutations)
 needs() {  # whether step $1 reads ../shared/data
     local s
