@@ -51,15 +51,17 @@ from nonlinear_benchmarks import _commit, write_summary  # noqa: E402
 from jaxcascade._benchmark._timing import device_description  # noqa: E402
 
 NAMES = ("Cascaded_Tanks", "WienerHammerBenchMark")
-# What the stand-in's system has that the cascade (input block, linear block, output
-# backlash) lacks, said where its final model misses the ARX peer.
+# Said where a stand-in's final model misses the ARX peer: what is known of why. The
+# Cascaded_Tanks miss is a finding, not a limit of the class: the cascade contains the
+# linear model, yet its own fit already scores worse than the ARX peer.
 WHY = {
-    "Cascaded_Tanks": "the tanks' square-root outflows act on the state inside the "
-    "dynamics and the overflow clips the upper tank's level, neither a static block "
-    "before the linear one nor a backlash after it",
+    "Cascaded_Tanks": "not explained yet: the declared cascade (which contains the linear "
+    "model) already scores worse than the ARX peer on the validation and the test record "
+    "(the report's table), and the effects the loop adds to it do not recover that",
     "WienerHammerBenchMark": "the static curve sits between two linear blocks, and the "
     "cascade has no linear block before its static one",
 }
+PUBLISHED = " There are no published figures for the stand-ins: the ARX peer is the linear figure."
 
 
 def cascaded_tanks(root: pathlib.Path, rng: np.random.Generator) -> None:
@@ -159,8 +161,8 @@ def main(argv=None) -> int:
         if measured["returncode"] != 0:
             resources["error"] = stdout[-2000:]
         (report / "resources.json").write_text(json.dumps(resources, indent=1))
-        write_summary(out, why=WHY, title=title, written_by=written_by)
-    write_summary(out, why=WHY, title=title, written_by=written_by)
+        write_summary(out, why=WHY, title=title, written_by=written_by, published=PUBLISHED)
+    write_summary(out, why=WHY, title=title, written_by=written_by, published=PUBLISHED)
     return 0
 
 
