@@ -67,26 +67,35 @@ def main(argv=None) -> int:
         if (report / "resources.json").exists() and not args.overwrite:
             print(f"{name}: finished earlier ({report}); skipped", file=sys.stderr)
             continue
-        report.mkdir(parents=True, exist_ok=True)
-        loop = ["loop", "--benchmark", name, "--data", args.data, "--report", str(report)]
-        loop += ["--json", *args.extra]
-        print(f"{name}: jaxcascade {' '.join(loop)}", file=sys.stderr, flush=True)
-        measured = run_loop(loop)
-        stdout = measured.pop("stdout")
-        resources = {
-            **measured,
-            "command": "jaxcascade " + " ".join(loop),
-            "machine": device_description(),
-            "load_before": os.getloadavg()[0],
-            "date": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
-            "commit": _commit(),
-        }
-        if measured["returncode"] != 0:
-            resources["error"] = stdout[-2000:]
-        (report / "resources.json").write_text(json.dumps(resources, indent=1))
+        run_benchmark(name, args.data, report, args.extra)
         write_summary(out)
     write_summary(out)
     return 0
+
+
+def run_benchmark(name: str, data, report: pathlib.Path, extra=(), **recorded) -> None:
+    """`jaxcascade loop --benchmark NAME --data DATA --report REPORT --json EXTRA` in a
+    fresh process (`brfd.run_loop`); its resources, the command, `recorded`, the machine,
+    the load before the run, the date and the commit in REPORT/resources.json."""
+    report.mkdir(parents=True, exist_ok=True)
+    loop = ["loop", "--benchmark", name, "--data", str(data), "--report", str(report)]
+    loop += ["--json", *extra]
+    print(f"{name}: jaxcascade {' '.join(loop)}", file=sys.stderr, flush=True)
+    load = os.getloadavg()[0]
+    measured = run_loop(loop)
+    stdout = measured.pop("stdout")
+    resources = {
+        **measured,
+        "command": "jaxcascade " + " ".join(loop),
+        **recorded,
+        "machine": device_description(),
+        "load_before": load,
+        "date": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
+        "commit": _commit(),
+    }
+    if measured["returncode"] != 0:
+        resources["error"] = stdout[-2000:]
+    (report / "resources.json").write_text(json.dumps(resources, indent=1))
 
 
 def _commit() -> str:

@@ -32,9 +32,6 @@ OUT/README.md).
 from __future__ import annotations
 
 import argparse
-import datetime
-import json
-import os
 import pathlib
 import shutil
 import sys
@@ -45,10 +42,7 @@ import scipy.signal
 
 sys.path.insert(0, str(pathlib.Path(__file__).parent))
 
-from brfd import run_loop  # noqa: E402
-from nonlinear_benchmarks import _commit, write_summary  # noqa: E402
-
-from jaxcascade._benchmark._timing import device_description  # noqa: E402
+from nonlinear_benchmarks import run_benchmark, write_summary  # noqa: E402
 
 NAMES = ("Cascaded_Tanks", "WienerHammerBenchMark")
 # Said where a stand-in's final model misses the ARX peer: what is known of why. The
@@ -134,33 +128,17 @@ def main(argv=None) -> int:
         if (report / "resources.json").exists() and not args.overwrite:
             print(f"{name}: finished earlier ({report}); skipped", file=sys.stderr)
             continue
-        report.mkdir(parents=True, exist_ok=True)
         # the stand-in's files in a folder of their own beside the reports, removed after
         # the run (the reports name it; nothing of it is kept)
         data = out / "data"
         shutil.rmtree(data, ignore_errors=True)
         try:
             MAKERS[name](data, np.random.default_rng(args.seed))
-            loop = ["loop", "--benchmark", name, "--data", str(data), "--report", str(report)]
-            loop += ["--json", *args.extra]
-            print(f"{name}: jaxcascade {' '.join(loop)}", file=sys.stderr, flush=True)
-            measured = run_loop(loop)
+            stand_in = f"python benchmarks/stand_in_benchmarks.py --seed {args.seed} "
+            stand_in += f"({MAKERS[name].__name__})"
+            run_benchmark(name, data, report, args.extra, stand_in=stand_in)
         finally:
             shutil.rmtree(data, ignore_errors=True)
-        stdout = measured.pop("stdout")
-        resources = {
-            **measured,
-            "command": "jaxcascade " + " ".join(loop),
-            "stand_in": f"python benchmarks/stand_in_benchmarks.py --seed {args.seed} "
-            f"({MAKERS[name].__name__})",
-            "machine": device_description(),
-            "load_before": os.getloadavg()[0],
-            "date": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
-            "commit": _commit(),
-        }
-        if measured["returncode"] != 0:
-            resources["error"] = stdout[-2000:]
-        (report / "resources.json").write_text(json.dumps(resources, indent=1))
         write_summary(out, why=WHY, title=title, written_by=written_by, published=PUBLISHED)
     write_summary(out, why=WHY, title=title, written_by=written_by, published=PUBLISHED)
     return 0
