@@ -15,10 +15,10 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 export JAXCASCADE_CACHE=${JAXCASCADE_CACHE:-off}   # compile times reported cold
-needs_shared_data=(loop stability backlash inputs nonlinear general_brfd)
+needs_shared_data=(loop stability backlash inputs nonlinear declared general_brfd)
 shared_data() {  # the shared folder a step reads
     case $1 in
-        nonlinear) echo "${NLB_DATA:-../shared/data/nonlinear_benchmarks}" ;;
+        nonlinear|declared) echo "${NLB_DATA:-../shared/data/nonlinear_benchmarks}" ;;
         *) echo "${BRFD_DATA:-../shared/data/brfd}" ;;
     esac
 }
@@ -145,6 +145,11 @@ stand_ins() {  # issue 32: the loop on simulated stand-ins for the two benchmark
     rm -rf results/nonlinear_benchmarks_stand_ins
     python benchmarks/stand_in_benchmarks.py --seed 0 --out results/nonlinear_benchmarks_stand_ins
 }
+declared() {  # issue 32 (needs ../shared/data): the loop's declared cascade against a refit
+    # from the linear model inside its class, on the benchmarks and the tank stand-in
+    python benchmarks/declared_start.py --data "${NLB_DATA:-../shared/data/nonlinear_benchmarks}" \
+        --out results/declared_start
+}
 general_brfd() {  # issue 39, point 5 (needs ../shared/data): the damper's loop, both
     # directions, with the curved backlash among the candidates of results/brfd
     rm -rf results/general_backlash/brfd
@@ -187,7 +192,7 @@ mutations() {  # issue 40: each deleted body (an effect, pem's iteration, robust
     python benchmarks/mutation_check.py --out results/mutation_check
 }
 all=(bench profile bench_robust speed distributed robust sweeps literal efficiency effects_loop loop
-    stability backlash reproduce recursive inputs noise nonlinear stand_ins statuses general general_brfd
+    stability backlash reproduce recursive inputs noise nonlinear stand_ins declared statuses general general_brfd
     slow_tests default_tests profile_tests mutations)
 needs() {  # whether step $1 reads ../shared/data
     local s
