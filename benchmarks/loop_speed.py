@@ -71,8 +71,6 @@ def child(argv: list[str]) -> dict:
     import jax
 
     from jaxcascade._cli import main
-    from jaxcascade._estimator import _robust
-    from jaxcascade._measured import _loop
 
     totals: dict[str, float] = {}
     stages: dict[str, dict[str, float]] = {}
@@ -110,10 +108,16 @@ def child(argv: list[str]) -> dict:
 
         return call
 
-    for name, stage in STAGES.items():
-        setattr(_loop, name, staged(getattr(_loop, name), stage))
-    # the declared cascade's robust fit (`Robust.__call__` calls the module's `robust`)
-    _robust.robust = staged(_robust.robust, "declared fit")
+    if argv[0] == "loop":
+        # only the loop's stages are wrapped: importing the loop's modules for another
+        # command would add their import time to its process
+        from jaxcascade._estimator import _robust
+        from jaxcascade._measured import _loop
+
+        for name, stage in STAGES.items():
+            setattr(_loop, name, staged(getattr(_loop, name), stage))
+        # the declared cascade's robust fit (`Robust.__call__` calls the module's `robust`)
+        _robust.robust = staged(_robust.robust, "declared fit")
     began = time.perf_counter()
     with contextlib.redirect_stdout(io.StringIO()):
         code = main(argv)
