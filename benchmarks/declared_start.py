@@ -79,7 +79,7 @@ def compare(name: str, root: str) -> dict:
     orders = Orders.parse("2,2,2,2")  # the loop's default
     options = argparse.Namespace(
         train=None, validate=None, test=None, data=root, max_samples=5000, benchmark=name,
-        scaling="auto", decimate=1, input=None, output=None,
+        scaling="auto", decimate=None, input=None, output=None,
     )  # fmt: skip
     training, _, _, _ = _benchmark_records(options, orders)
     integrating = integrates(

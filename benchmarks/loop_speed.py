@@ -199,6 +199,11 @@ def brfd_argv(root: str, folder: pathlib.Path) -> list[str]:
     return brfd.loop_argv(folder, pathlib.Path(root), options, *run)
 
 
+def folder_size(folder: pathlib.Path) -> int:
+    """Bytes of the files under `folder` (0 where it does not exist)."""
+    return sum(p.stat().st_size for p in folder.rglob("*") if p.is_file())
+
+
 def markdown(frame) -> str:
     """A pipe table of `frame` (no optional dependency)."""
     columns = [str(c) for c in frame.columns]
@@ -267,6 +272,7 @@ def main(argv=None) -> int:
                         "cache_hits": int(t.get("cache_hits", 0)),
                         **{f"{k}_s": round(t.get(k, 0.0), 2) for k in EVENTS.values()},
                         "execution_and_host_s": round(result["wall"] - accounted, 2),
+                        "cache_folder_mb": round(folder_size(cache) / 2**20, 1),
                     }
                     rows.append(row)
                     print(row, flush=True)
@@ -300,9 +306,10 @@ def main(argv=None) -> int:
         "Each case in a fresh process: cold (empty persistent cache), then warm (the cache "
         "the cold run filled). Seconds. `programs`: programs traced and lowered (in every "
         "process, cached or not); `compile_or_load`: XLA compiling them or loading them "
-        "from the persistent cache (`cache_hits` loaded, in `cache_load_s`; programs that "
-        "compile in under 0.5 s are not cached, JAX's threshold as the CLI sets it); "
-        "`execution_and_host`: the rest of the command's wall time; `process`: the whole "
+        "from the persistent cache (`cache_hits` loaded, in `cache_load_s`; the CLI keeps "
+        "every program in the cache, however quickly it compiled); "
+        "`execution_and_host`: the rest of the command's wall time; `cache_folder_mb`: the "
+        "cache folder after the run; `process`: the whole "
         "process, Python's start and imports included. On a cold run the tracing that "
         "`jax.export` does for the kept programs (`_compile.exported`) sends no trace "
         "event and is counted in `execution_and_host`.",

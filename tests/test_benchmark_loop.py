@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from jaxcascade._cli import main
-from jaxcascade._cli._loop import benchmark_split
+from jaxcascade._cli._loop import band_edge, benchmark_decimation, benchmark_split
 
 ROOT = pathlib.Path(__file__).resolve().parents[2] / "shared" / "data" / "nonlinear_benchmarks"
 needs_data = pytest.mark.skipif(
@@ -39,6 +39,24 @@ def test_split_of_a_long_record_keeps_the_latest_samples():
     v_name, v, _ = parts["validation"]
     assert v_name == "train 1 [22341:24841]" and len(v) == 2500
     assert name == "train 1 [12341:22341]" and len(u) == 10000 and u[-1] + 1 == v[0]
+
+
+def test_a_long_narrow_band_record_is_decimated_as_far_as_its_band_allows():
+    rng = np.random.default_rng(0)
+    t = np.arange(24000)
+    # input and output difference within 0.01 cycles per sample: up to 0.4/0.01 = 40
+    slow = np.sin(2 * np.pi * 0.004 * t) + 0.5 * np.sin(2 * np.pi * 0.009 * t)
+    records = [("train", slow, np.cumsum(slow))]
+    # the budget alone asks for ceil(24000 / 5000) = 5, within the band's 40
+    assert benchmark_decimation(records, 5000) == 5
+    assert benchmark_decimation(records, 30000) == 1  # within the budget: none
+    # a component at 0.05 cycles per sample bounds it at floor(0.4 / 0.05) = 8
+    mixed = slow + np.sin(2 * np.pi * 0.05 * t)
+    assert benchmark_decimation([("train", mixed, np.cumsum(slow))], 1000) == 8
+    # white noise fills the band: not decimated, however long
+    white = rng.normal(size=24000)
+    assert benchmark_decimation([("train", white, np.cumsum(slow))], 1000) == 1
+    assert band_edge(np.ones(100)) == 0.0
 
 
 def test_split_drops_whole_early_records_past_the_budget():

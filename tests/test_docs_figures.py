@@ -76,6 +76,10 @@ ALLOWED: list[tuple[str, str]] = [
     (r"1-50 % of the input span", "the Prandtl-Ishlinskii operator's threshold grid"),
     (r"\d+-\d+ % and \d+-\d+ % bands", "the quantile bands a figure draws"),
     (r"99 % band", "the confidence level of the band a residual figure draws"),
+    (
+        r"99\.9 % of the power [\s\S]{0,80}? below 0\.4/d",
+        "the benchmarks' decimation rule (`_cli._loop.BENCHMARK_DECIMATION`)",
+    ),
 ]
 # A space in an entry matches any run of whitespace, a line break too.
 _ALLOWED = [re.compile(pattern.replace(" ", r"\s+")) for pattern, _ in ALLOWED]

@@ -51,6 +51,28 @@ def test_several_validation_records_are_scored_each_from_its_own_state_and_poole
     np.testing.assert_array_equal(one.residual, listed.residual)
 
 
+def test_an_integrating_loop_judges_the_output_integrated_back():
+    # the records' outputs are differences (`_integrating`): the error is the NRMSE of
+    # each scored part summed from its start, its level set from the measured output;
+    # the residual and its tests stay on the difference
+    ex, records = _records(2)
+    model = plain(ex.params())
+    n = 20
+    us, ys = [r[0] for r in records], [r[1] for r in records]
+    plain_error = evaluate(model, us, ys, init_samples=n)
+    integrated = evaluate(model, us, ys, init_samples=n, integrating=True)
+    np.testing.assert_array_equal(integrated.residual, plain_error.residual)
+    levels, simulated_levels = [], []
+    for u, y in records:
+        simulated = np.asarray(initialised_output(model, u, y, n, n))
+        levels.append(np.cumsum(y[n:]))
+        simulated_levels.append(np.cumsum(simulated))
+    level, simulated_level = np.concatenate(levels), np.concatenate(simulated_levels)
+    expected = np.sqrt(np.mean((level - simulated_level) ** 2)) / np.std(level)
+    assert integrated.error == pytest.approx(expected, rel=1e-12)
+    assert integrated.error != pytest.approx(plain_error.error, rel=1e-3)
+
+
 def test_a_window_applies_to_one_validation_record_only():
     ex, records = _records(3)
     (u, y), *validation = records

@@ -315,7 +315,7 @@ def _benchmark_table(bench: dict) -> list[str]:
         )
         + f". Published figures: {bench['published_source']}. Estimation and validation "
         f"records from the training data: {bench['split_rule']} (MAX = {bench['max_samples']});"
-        f" decimation {bench['decimation']}.",
+        f" decimation {bench['decimation']} ({bench['decimation_rule']}).",
         "",
     ]
     return lines
@@ -485,6 +485,7 @@ def _run_loop(args, checkpoints) -> int:
         effects=_effects(args.effects),
         robust=Robust(retries=args.retries),
         init_samples=max(args.init_samples - 1, 0) if integrating else args.init_samples,
+        integrating=integrating is not None,
         t_threshold=args.dm_threshold,
         min_gain=args.min_gain,
         key=jax.random.PRNGKey(args.seed),
@@ -736,6 +737,7 @@ def _benchmark_summary(bench, scores, scaling, args) -> dict:
         "decimation": args.decimate,
         "max_samples": args.max_samples,
         "split_rule": BENCHMARK_RULE,
+        "decimation_rule": args.decimation_rule,
         "published_source": "Champneys et al. (2024), arXiv 2405.10779, free-run test RMSE",
         "tests": tests,
     }
@@ -806,10 +808,14 @@ def _benchmark_records(args, orders):
     if args.max_samples < 100:
         raise CLIError(f"--max-samples must be >= 100, got {args.max_samples}.")
     bench = benchmark_data(args.benchmark, args.data)
-    parts = benchmark_split(
-        [(r.name, np.asarray(r.u, float), np.asarray(r.y, float)) for r in bench.train],
-        args.max_samples,
-    )
+    records = [(r.name, np.asarray(r.u, float), np.asarray(r.y, float)) for r in bench.train]
+    if type(args.decimate) is DefaultDecimation:  # not given: the benchmarks' rule
+        args.decimate = benchmark_decimation(records, args.max_samples)
+        args.decimation_rule = f"by the rule without --decimate: {BENCHMARK_DECIMATION}"
+    else:
+        args.decimation_rule = "--decimate as given"
+    # MAX samples after decimation
+    parts = benchmark_split(records, args.max_samples * args.decimate)
     u_all = np.concatenate([u for _, u, _ in parts["estimation"]])
     y_all = np.concatenate([y for _, _, y in parts["estimation"]])
     scaling = Scaling.from_data(u_all, y_all, args.scaling)
@@ -838,8 +844,49 @@ def _benchmark_records(args, orders):
 BENCHMARK_RULE = (
     "validation: the last quarter of the last training record, at most MAX/4 samples; "
     "estimation: every other training record and the samples of the last one before the "
-    "validation part, the latest MAX samples of them in all (MAX = --max-samples)"
+    "validation part, the latest MAX samples of them in all (MAX = --max-samples, in "
+    "samples after decimation)"
 )
+
+
+# The decimation of a benchmark's records without --decimate, the same for every
+# benchmark (`benchmark_decimation`): a long record at a high rate is decimated as far as
+# its signals' band allows, so that the estimation samples span all of it.
+BENCHMARK_DECIMATION = (
+    "the largest factor d, up to the one that brings the training data within MAX "
+    "samples, at which 99.9 % of the power of the input and of the output's difference "
+    "(their means removed) lies below 0.4/d cycles per sample (80 % of the decimated "
+    "Nyquist frequency); 1 where none does"
+)
+
+
+class DefaultDecimation(int):
+    """`--decimate`'s default in `loop`: the measured-data default's value, told apart
+    from the same factor given, which `--benchmark` takes as given."""
+
+
+def band_edge(x, fraction: float = 0.999) -> float:
+    """The frequency (cycles per sample) below which `fraction` of the power of `x`, its
+    mean removed, lies (periodogram); 0 for a constant signal."""
+    import numpy as np
+
+    x = np.asarray(x, float)
+    power = np.abs(np.fft.rfft(x - x.mean())) ** 2
+    total = power.sum()
+    if not total > 0:
+        return 0.0
+    cumulative = np.cumsum(power) / total
+    return float(np.fft.rfftfreq(x.size)[np.searchsorted(cumulative, fraction)])
+
+
+def benchmark_decimation(records, max_samples: int) -> int:
+    """`BENCHMARK_DECIMATION`'s factor for the training records `[(name, u, y), ...]`."""
+    import numpy as np
+
+    wanted = max(1, -(-sum(len(u) for _, u, _ in records) // max_samples))
+    edge = max(max(band_edge(u), band_edge(np.diff(y))) for _, u, y in records)
+    allowed = int(0.4 // edge) if edge > 0 else wanted
+    return max(1, min(wanted, allowed))
 
 
 def benchmark_split(records, max_samples: int) -> dict:
@@ -1004,6 +1051,13 @@ def add_parser(subparsers) -> None:
         "training data) and a quarter of it for validation (default 5000)",
     )
     add_record_arguments(parser, required=False)
+    # the measured-data default (1), or with --benchmark the benchmarks' rule
+    parser.set_defaults(decimate=DefaultDecimation(_defaults.DECIMATE))
+    parser._option_string_actions["--decimate"].help = (
+        "anti-aliased decimation factor (default 1; with --benchmark, the largest factor "
+        "that brings the training data within --max-samples and that the signals' band "
+        "allows: see the report)"
+    )
     parser.add_argument(
         "--max-effects",
         type=int,

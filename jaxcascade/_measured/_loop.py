@@ -374,6 +374,7 @@ def evaluate(
     sample_period: float = 1.0,
     window: tuple[int, int] | None = None,
     init_samples: int = 0,
+    integrating: bool = False,
 ) -> Evaluation:
     """The model on the validation record. With `init_samples = n > 0` the model's
     state is set from the measured output on the first `n` samples (`initialised_output`)
@@ -385,7 +386,15 @@ def evaluate(
     NRMSE (normalised by the variance of the joined output), the residual tests (whose
     correlations then also span the joins: `max_lag` of the record's total length) and
     the significance test; `window` then applies to none (a `ValueError` otherwise).
-    One record is judged exactly as before."""
+    One record is judged exactly as before.
+
+    `integrating`: the records' outputs are differences of the measured output
+    (`_integrating`), and `error` and `window_error` are the NRMSE of the output
+    integrated back (each scored part summed from its start, where its level is set
+    from the measured output): the figure the model is scored by, so that an effect is
+    kept only where it lowers the error of the measured output, not only of its
+    difference. The residual, its tests and the prediction error stay on the
+    difference."""
     us, ys = _records(u, y)
     if len(us) > 1 and window is not None:
         raise ValueError("evaluate: a window applies to one validation record, not several.")
@@ -420,7 +429,12 @@ def evaluate(
     scored = join([q[6] for q in parts])
     level = join([q[7] for q in parts])
     innovations = join([innovations_np(model.noise, q[2]) for q in parts])
-    error = score(y_s, scored)
+    if integrating:
+        error = score(
+            join([np.cumsum(q[1]) for q in parts]), join([np.cumsum(q[6]) for q in parts])
+        )
+    else:
+        error = score(y_s, scored)
     tests = residual_tests(
         u_s,
         innovations,
@@ -431,7 +445,8 @@ def evaluate(
     )
     window_error = None
     if window is not None:
-        window_error = score(np.asarray(ys[0])[slice(*window)], parts[0][5])
+        level = np.cumsum if integrating else np.asarray
+        window_error = score(level(np.asarray(ys[0])[slice(*window)]), level(parts[0][5]))
     prediction_error = score(y_s, y_s - innovations)
     return Evaluation(residual, y_sim, error, tests, window_error, innovations, prediction_error)
 
@@ -599,6 +614,7 @@ def model_error_loop(
     robust: Robust | None = None,
     key=None,
     init_samples: int = 0,
+    integrating: bool = False,
     checkpoints: Checkpoints | None = None,
 ) -> LoopResult:
     """Run the loop (module docstring) on an estimation and a validation record.
@@ -628,6 +644,9 @@ def model_error_loop(
     - `init_samples`: with `n > 0` every model is judged on the validation record with
       its state set from the measured output on the first `n` samples (`evaluate`), the
       nonlinear benchmarks' convention, and on the samples after them.
+    - `integrating`: the records' outputs are differences of a measured output that
+      integrates its input (`_integrating`): every validation NRMSE, and so every
+      decision, is of the output integrated back (`evaluate`).
     - `robust`, `key`: the estimator of the declared cascade (default `Robust()`) and its
       PRNG key (the multi-start's draws; default `PRNGKey(0)`).
     - `checkpoints`: where the loop keeps its work (`_loop_checkpoint.Checkpoints`): every
@@ -681,7 +700,7 @@ def model_error_loop(
     scored_val = np.concatenate([y[int(init_samples) :] for _, y in checked])
 
     def assess(model):
-        return evaluate(model, u_val_np, y_val_np, sample_period, window, init_samples)
+        return evaluate(model, u_val_np, y_val_np, sample_period, window, init_samples, integrating)
 
     names = tuple(effects or (*EFFECTS, ARNoise.name))
     options = {
@@ -701,6 +720,8 @@ def model_error_loop(
     }
     if several:  # a single record's identity as before (its checkpoints stay valid)
         options["validation_records"] = len(checked)
+    if integrating:  # likewise: only a loop that integrates names it
+        options["integrating"] = True
     found = store.start(identity([*us, *ys, *(a for pair in checked for a in pair)], options))
     if found:
         say(f"resuming from '{store.folder}': {found} finished fit(s) and round(s) kept there")
