@@ -60,7 +60,7 @@ def compare(name: str, root: str) -> dict:
     import jax
     import jax.numpy as jnp
 
-    from jaxcascade._cli._loop import _benchmark_records
+    from jaxcascade._cli._loop import DefaultDecimation, _benchmark_records
     from jaxcascade._estimator._robust import Robust
     from jaxcascade._measured._effects import plain
     from jaxcascade._measured._effects._base import Effect, Start
@@ -79,7 +79,7 @@ def compare(name: str, root: str) -> dict:
     orders = Orders.parse("2,2,2,2")  # the loop's default
     options = argparse.Namespace(
         train=None, validate=None, test=None, data=root, max_samples=5000, benchmark=name,
-        scaling="auto", decimate=None, input=None, output=None,
+        scaling="auto", decimate=DefaultDecimation(1), input=None, output=None,
     )  # fmt: skip
     training, _, _, _ = _benchmark_records(options, orders)
     integrating = integrates(
