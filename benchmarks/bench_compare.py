@@ -11,8 +11,9 @@ compares with the installed package instead (run from a temporary folder, so tha
 import finds the installed copy, not this checkout). This checkout's bench runs from its
 root with `PYTHONPATH` set to it. Each of `--runs` rounds runs both, `python -m
 jaxcascade bench --json` plus the BENCH ARGUMENTS (default: the bench's own workload),
-each in a fresh process, alternating which goes first (A B, B A, ...) so that a drift
-in the machine's load touches both alike.
+each in a fresh process with JAX's persistent compilation cache off (every run
+compiles), alternating which goes first (A B, B A, ...) so that a drift in the
+machine's load touches both alike.
 
 Prints each run's fits/s (sample updates/s with `-- --estimator recursive`), compile
 seconds and load average, then the ratio of this checkout's rate to the reference's and
@@ -41,7 +42,9 @@ COMPILE_WARNING = 1.25
 
 def run_bench(folder: pathlib.Path, pythonpath: str | None, arguments: list[str]) -> dict:
     """One `python -m jaxcascade bench --json` in a fresh process from `folder`."""
-    env = dict(os.environ)
+    # JAX's persistent cache off: the compile time compared is XLA's own, not a load of
+    # the executable the other checkout (or an earlier run) left in the cache
+    env = dict(os.environ, JAXCASCADE_CACHE="off")
     env.pop("PYTHONPATH", None)
     if pythonpath:
         env["PYTHONPATH"] = pythonpath
