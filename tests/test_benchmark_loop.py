@@ -59,6 +59,25 @@ def test_a_long_narrow_band_record_is_decimated_as_far_as_its_band_allows():
     assert band_edge(np.ones(100)) == 0.0
 
 
+@needs_data
+def test_emps_is_decimated_by_the_rule_unless_decimate_is_given():
+    # EMPS: 24,841 training samples at 1 kHz, a position whose input's band ends far
+    # below the Nyquist frequency; the rule's factor is ceil(24841 / 5000) = 5, and a
+    # given --decimate (1 too) is taken as given
+    from jaxcascade._cli import build_parser
+    from jaxcascade._cli._loop import _benchmark_records
+    from jaxcascade._system._model import Orders
+
+    for extra, factor, estimation in (([], 5, 3727), (["--decimate", "1"], 1, 5000)):
+        argv = ["loop", "--benchmark", "EMPS", "--data", str(ROOT), *extra]
+        args = build_parser().parse_args(argv)
+        training, validations, tests, _ = _benchmark_records(args, Orders())
+        assert args.decimate == factor
+        assert args.decimation_rule.startswith("by the rule" if not extra else "--decimate")
+        assert sum(len(r.u) for r in training) == estimation
+        assert all(r.decimation == factor for r in [*training, *validations, *tests])
+
+
 def test_split_drops_whole_early_records_past_the_budget():
     parts = benchmark_split(_records(5000, 5000, 8000), max_samples=8000)
     names = [name for name, _, _ in parts["estimation"]]
@@ -127,6 +146,8 @@ def test_loop_on_ced_scores_every_test_set_in_its_unit(capsys, tmp_path):
             test["published"]["linear_state_space"], test["published"]["linear_arx"]
         )
     assert out["init_samples"] == 10
+    # CED's short records at their band: not decimated, and the report says by which rule
+    assert bench["decimation"] == 1 and bench["decimation_rule"].startswith("by the rule")
     full = json.loads((tmp_path / "report.json").read_text())
     estimation = [r["source"] for r in full["records"]["estimation"]]
     assert estimation == ["CED train 1", "CED train 2 [0:300]"]
@@ -136,6 +157,7 @@ def test_loop_on_ced_scores_every_test_set_in_its_unit(capsys, tmp_path):
     first = report.split("\n## ", 2)[1]
     assert first.startswith("CED: test RMSE (ticks/s)")
     assert "linear state space (published)" in first and "linear ARX peer" in first
+    assert "decimation 1 (by the rule without --decimate: the largest factor d" in first
 
 
 def test_an_integrating_output_is_scored_through_its_difference():
