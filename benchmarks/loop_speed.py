@@ -34,9 +34,11 @@ import contextlib
 import functools
 import io
 import json
+import logging
 import os
 import pathlib
 import platform
+import re
 import subprocess
 import sys
 import tempfile
@@ -93,6 +95,24 @@ def child(argv: list[str]) -> dict:
     jax.monitoring.register_event_duration_secs_listener(durations)
     jax.monitoring.register_event_listener(counts)
 
+    # every program by the name JAX gives it (`jit(name)`), per stage: JAX's compile log
+    programs: dict[str, dict[str, float]] = {}
+
+    class Compiles(logging.Handler):
+        def emit(self, record):
+            message = record.getMessage()
+            found = re.match(r"Compiling (\S+) with global shapes", message)
+            if found:
+                entry = programs.setdefault(f"{where[-1]}|{found.group(1)}", {})
+                entry["programs"] = entry.get("programs", 0) + 1
+            found = re.match(r"Finished XLA compilation of (\S+) in ([\d.e+-]+) sec", message)
+            if found:
+                entry = programs.setdefault(f"{where[-1]}|{found.group(1)}", {})
+                entry["xla_s"] = entry.get("xla_s", 0.0) + float(found.group(2))
+
+    jax.config.update("jax_log_compiles", True)
+    logging.getLogger("jax").addHandler(Compiles())
+
     def staged(function, stage):
         @functools.wraps(function)
         def call(*args, **kwargs):
@@ -126,7 +146,13 @@ def child(argv: list[str]) -> dict:
     stages["other"]["wall"] = wall - sum(
         s.get("wall", 0.0) for k, s in stages.items() if k != "other"
     )
-    return {"code": code, "wall": wall, "totals": totals, "stages": stages}
+    return {
+        "code": code,
+        "wall": wall,
+        "totals": totals,
+        "stages": stages,
+        "programs": programs,
+    }
 
 
 def run_case(argv: list[str], cache: pathlib.Path) -> dict:
@@ -225,6 +251,43 @@ def machine() -> str:
     return f"{device_description()}, {avx}, Python {platform.python_version()}"
 
 
+def _by_name(programs, top: int = 25):
+    """The cold loop's programs summed by name, the most numerous first (`top` rows and
+    one row for the rest)."""
+    import pandas as pd
+
+    if programs.empty:
+        return programs
+    cold = programs[(programs.case == "loop input_delay") & (programs.cache == "cold")]
+    cold = cold[cold.repeat == cold.repeat.min()]
+    table = (
+        cold.groupby("program", as_index=False)[["programs", "xla_compile_s"]]
+        .sum()
+        .sort_values(["programs", "xla_compile_s"], ascending=False)
+    )
+    stages = cold.groupby("program")["stage"].agg(lambda s: ", ".join(sorted(set(s))))
+    table["stages"] = table.program.map(stages)
+    if len(table) > top:
+        rest = table.iloc[top:]
+        table = pd.concat(
+            [
+                table.iloc[:top],
+                pd.DataFrame(
+                    [
+                        {
+                            "program": f"{len(rest)} others",
+                            "programs": int(rest.programs.sum()),
+                            "xla_compile_s": round(float(rest.xla_compile_s.sum()), 2),
+                            "stages": "-",
+                        }
+                    ]
+                ),
+            ]
+        )
+    table["xla_compile_s"] = table.xla_compile_s.round(2)
+    return table
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", default="results/loop_speed")
@@ -244,7 +307,7 @@ def main(argv=None) -> int:
 
     out = pathlib.Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    rows, stage_rows = [], []
+    rows, stage_rows, program_rows = [], [], []
     with tempfile.TemporaryDirectory() as tmp:
         folder = pathlib.Path(tmp)
         est, val, clean = records(folder, args.n)
@@ -276,6 +339,19 @@ def main(argv=None) -> int:
                     }
                     rows.append(row)
                     print(row, flush=True)
+                    for key, values in result["programs"].items():
+                        stage, name = key.split("|", 1)
+                        program_rows.append(
+                            {
+                                "case": case,
+                                "cache": state,
+                                "repeat": repeat,
+                                "stage": stage,
+                                "program": name,
+                                "programs": int(values.get("programs", 0)),
+                                "xla_compile_s": round(values.get("xla_s", 0.0), 2),
+                            }
+                        )
                     for stage, values in result["stages"].items():
                         stage_rows.append(
                             {
@@ -292,6 +368,8 @@ def main(argv=None) -> int:
     stages = pd.DataFrame(stage_rows)
     table.to_csv(out.with_suffix(".csv"), index=False)
     stages.to_csv(out.parent / f"{out.name}_stages.csv", index=False)
+    program_table = pd.DataFrame(program_rows)
+    program_table.to_csv(out.parent / f"{out.name}_programs.csv", index=False)
     commit = subprocess.run(
         ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=False
     ).stdout.strip()
@@ -319,6 +397,15 @@ def main(argv=None) -> int:
         "## Per stage of the loop",
         "",
         markdown(stages[stages.case.str.startswith("loop")]),
+        "",
+        "## The cold loop's programs by name",
+        "",
+        "Each program as JAX names it (`jit(function)`, from JAX's compile log), summed "
+        "over the loop's stages: how many were lowered and XLA's compile seconds "
+        "(`*_programs.csv` has every case, cache state and stage). A program per "
+        "model structure, record bucket or start count shows here as a count above 1.",
+        "",
+        markdown(_by_name(program_table)),
         "",
     ]
     out.with_suffix(".md").write_text("\n".join(lines))

@@ -353,7 +353,13 @@ class _Slot:
 
 def _runner(exported_program, template):
     options = compiler_options()
-    run = jax.jit(exported_program.call, compiler_options=options or None)
+
+    def run_kept(*leaves):
+        return exported_program.call(*leaves)
+
+    # named after the kept function (`jit(_refit)` in JAX's compile log), not `call`
+    run_kept.__name__ = run_kept.__qualname__ = exported_program.fun_name
+    run = jax.jit(run_kept, compiler_options=options or None)
     parts, tree = jax.tree_util.tree_flatten(template, is_leaf=lambda x: isinstance(x, _Slot))
 
     def program(*leaves):
@@ -390,6 +396,8 @@ def _export(function, static, tree, leaves, where: pathlib.Path, key: str, check
         kept["template"] = jax.tree_util.tree_unflatten(out_tree, template)
         return outputs
 
+    # the program keeps the function's name (`Exported.fun_name`, JAX's compile log)
+    flat.__name__ = flat.__qualname__ = getattr(function, "__name__", "flat")
     specs = [jax.ShapeDtypeStruct(leaf.shape, leaf.dtype) for leaf in leaves]
     try:
         program = jax.export.export(jax.jit(flat), disabled_checks=checks)(*specs)
