@@ -285,6 +285,8 @@ def _by_name(programs, top: int = 25):
             ]
         )
     table["xla_compile_s"] = table.xla_compile_s.round(2)
+    # as code: a name such as `jit(<lambda>)` is not HTML in the docs
+    table["program"] = [name if name.endswith(" others") else f"`{name}`" for name in table.program]
     return table
 
 
