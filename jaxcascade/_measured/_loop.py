@@ -445,8 +445,8 @@ def evaluate(
     )
     window_error = None
     if window is not None:
-        level = np.cumsum if integrating else np.asarray
-        window_error = score(level(np.asarray(ys[0])[slice(*window)]), level(parts[0][5]))
+        as_scored = np.cumsum if integrating else np.asarray
+        window_error = score(as_scored(np.asarray(ys[0])[slice(*window)]), as_scored(parts[0][5]))
     prediction_error = score(y_s, y_s - innovations)
     return Evaluation(residual, y_sim, error, tests, window_error, innovations, prediction_error)
 
