@@ -118,14 +118,12 @@ def compare(name: str, root: str) -> dict:
     held_out = {}
     for label, model in fits.items():
         validation = validations[0]
-        u_val, y_val = validation.u, validation.y
         n = -(-bench.n_init // options.decimate)
-        if integrating is not None:
-            u_val, y_val = u_val[1:], np.diff(y_val)
+        judged = validation if integrating is None else differenced(validation)
         held_out[f"{label}_validation_nrmse"] = evaluate(
             model,
-            u_val,
-            y_val,
+            judged.u,
+            judged.y,
             init_samples=max(n - 1, 0) if integrating is not None else n,
             integrating=integrating is not None,
         ).error
