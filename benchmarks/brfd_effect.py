@@ -55,7 +55,7 @@ def main(argv=None) -> int:
     from jaxcascade._metrics import score
 
     def refine_slack(effect, records):
-        from jaxcascade._estimator._refine import least_squares
+        from jaxcascade._estimator._levenberg import least_squares
 
         us = tuple(jnp.asarray(r[0]) for r in records)
         ys = tuple(jnp.asarray(r[1]) for r in records)

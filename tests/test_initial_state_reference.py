@@ -5,7 +5,7 @@ the state before `start - n` fitted to the measured output on `[start - n, start
 must reproduce the oracle's output after `start`.
 
 Tolerance, derived from the fit's stopping rule: Levenberg-Marquardt
-(`_estimator._refine.least_squares`) stops once a step moves every state component by
+(`_estimator._levenberg.least_squares`) stops once a step moves every state component by
 less than `atol + rtol |z_k|` (1e-10, 1e-8), so the fitted state is within about that of
 a state that reproduces the window. The output after the window moves, for such a
 change of each component, by what the oracle says (every block is continuous and

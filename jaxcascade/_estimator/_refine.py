@@ -3,7 +3,8 @@
 The simulation error `simulate(params, u) - y` is minimised over all parameters by
 Levenberg-Marquardt: `refine` with this package's own (`_levenberg`, on the normal
 equations that `_sensitivity` forms from forward sensitivities), `least_squares` with
-optimistix's on any residual (the model-error loop's extended models). Parameters are
+optimistix's on any residual (the general backlash's single-record fits; the
+model-error loop uses `_levenberg.least_squares`). Parameters are
 mapped to an unconstrained vector `z` so that every iterate is admissible by
 construction: breakpoints stay sorted inside the input range, `mR > 0`, gaps >= 0 and
 the linear block stays stable (it is parameterised by its reflection coefficients). The

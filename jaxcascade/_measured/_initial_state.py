@@ -48,7 +48,7 @@ from jax.flatten_util import ravel_pytree
 from jaxtyping import Array, Float
 
 from .._compile import exported, pad
-from .._estimator._refine import least_squares
+from .._estimator._levenberg import least_squares
 from .._metrics import score
 from .._system._general_backlash import general_backlash
 from .._system._model import CascadeParams

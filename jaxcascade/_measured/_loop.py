@@ -48,7 +48,8 @@ from jaxtyping import Array
 
 from .._compile import bound, compile_count, exported, filter_jit, pack, pad
 from .._estimator._efficiency import standard_errors
-from .._estimator._refine import from_unconstrained, least_squares, to_unconstrained
+from .._estimator._levenberg import least_squares
+from .._estimator._refine import from_unconstrained, to_unconstrained
 from .._estimator._robust import Robust
 from .._metrics import score
 from .._system._general_backlash import general_switches

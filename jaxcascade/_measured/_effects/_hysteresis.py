@@ -357,7 +357,7 @@ class BacklashFriction(_LinearPath):
 def _fit_backlash_friction(z0, groups, weights, starts, max_steps):
     """Levenberg-Marquardt of `BacklashFriction.fit` from `z0` on packed records
     (`_compile.pack`): one compiled program per record buckets, not per call."""
-    from ..._estimator._refine import least_squares
+    from ..._estimator._levenberg import least_squares
 
     def residual(z, args):
         g, k, up, lo = jnp.exp(z[:4])

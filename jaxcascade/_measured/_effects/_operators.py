@@ -192,7 +192,7 @@ def fit_lugre(records, dt: float, max_steps: int = 200) -> dict[str, float]:
     Levenberg-Marquardt on several records `[(u, y), ...]` jointly, each simulated from
     rest; every parameter but the offset through its logarithm (positive). A peer model
     for measured friction, in the records' units. Returns `{name: value}`."""
-    from ..._estimator._refine import least_squares
+    from ..._estimator._levenberg import least_squares
 
     us = tuple(jnp.asarray(u) for u, _ in records)
     ys = tuple(jnp.asarray(y, us[0].dtype) for _, y in records)
