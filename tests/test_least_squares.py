@@ -79,6 +79,13 @@ def test_rejected_steps_and_the_budget():
         np.testing.assert_allclose(z, expected, rtol=1e-10, atol=1e-12)
 
 
+def test_no_step_allowed_is_the_starts_cost():
+    z, cost, status, steps = least_squares(_rosenbrock, jnp.asarray([-1.2, 1.0]), None, max_steps=0)
+    assert float(cost) == pytest.approx(12.1, rel=1e-14)
+    assert (int(status), int(steps)) == (int(jc.Status.max_iterations), 0)
+    np.testing.assert_array_equal(z, [-1.2, 1.0])
+
+
 def test_a_start_that_is_not_finite_is_diverged_and_returned():
     def residual(z, args):
         return jnp.log(z) - 1.0

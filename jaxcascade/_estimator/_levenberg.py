@@ -191,8 +191,11 @@ def least_squares(residual, z0, args, *, max_steps: int = 100, rtol=1e-8, atol=1
 
     T = jax.eval_shape(lambda z: residual(z, args), z0).shape[0]
 
+    # the start is evaluated even with no step allowed (`max_steps` 0: its cost)
+    limit = max(int(max_steps), 1)
+
     def running(state):
-        return (state[-1] == _RUNNING) & (state[-2] < max_steps)  # status, step
+        return (state[-1] == _RUNNING) & (state[-2] < limit)  # status, step
 
     def body(state):
         z, r, JtJ, Jtr, trial, s, step, status = state
@@ -240,5 +243,6 @@ def least_squares(residual, z0, args, *, max_steps: int = 100, rtol=1e-8, atol=1
     )
     z, r, _, _, _, _, steps, status = jax.lax.while_loop(running, body, state)
     status = jnp.where(status == _RUNNING, Status.max_iterations, status).astype(jnp.int32)
+    steps = jnp.minimum(steps, max_steps)
     cost = jnp.mean(r**2)
     return z, jnp.where(jnp.isfinite(cost), cost, jnp.inf), status, steps
