@@ -27,6 +27,7 @@ prints the same as JSON. Exit code 0 unless a bench failed (2).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import pathlib
@@ -72,6 +73,41 @@ def describe(folder: pathlib.Path) -> str:
     return done.stdout.strip()[:72] if done.returncode == 0 else str(folder)
 
 
+@contextlib.contextmanager
+def checkout(ref: str):
+    """A temporary `git worktree` of commit `ref` (removed afterwards); a `RuntimeError`
+    where git cannot check it out."""
+    with tempfile.TemporaryDirectory(prefix="compare_") as scratch:
+        folder = pathlib.Path(scratch) / "reference"
+        added = subprocess.run(
+            ["git", "worktree", "add", "--detach", str(folder), ref],
+            cwd=ROOT,
+            capture_output=True,
+            text=True,
+        )
+        if added.returncode != 0:
+            raise RuntimeError(f"cannot check out {ref}: {added.stderr.strip()}")
+        try:
+            yield folder
+        finally:
+            subprocess.run(
+                ["git", "worktree", "remove", "--force", str(folder)], cwd=ROOT, capture_output=True
+            )
+
+
+def alternate(runs: int, run, report=None) -> list[dict]:
+    """`runs` rounds of `run("this")` and `run("reference")`, alternating which goes
+    first (A B, B A, ...); `report(round, figures)` after each. The rounds' figures."""
+    pairs = []
+    for round_ in range(runs):
+        order = ["this", "reference"] if round_ % 2 == 0 else ["reference", "this"]
+        figures = {which: run(which) for which in order}
+        pairs.append(figures)
+        if report is not None:
+            report(round_, figures)
+    return pairs
+
+
 def main(argv=None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     bench_arguments = []
@@ -91,52 +127,38 @@ def main(argv=None) -> int:
     if args.runs < 1:
         parser.error("--runs must be at least 1")
 
-    with tempfile.TemporaryDirectory(prefix="bench_compare_") as scratch:
-        scratch = pathlib.Path(scratch)
+    with contextlib.ExitStack() as stack:
         if args.installed:
-            reference, reference_path, label = scratch, None, "installed package"
+            reference = pathlib.Path(stack.enter_context(tempfile.TemporaryDirectory()))
+            reference_path, label = None, "installed package"
         else:
-            reference = scratch / "reference"
-            added = subprocess.run(
-                ["git", "worktree", "add", "--detach", str(reference), args.ref],
-                cwd=ROOT,
-                capture_output=True,
-                text=True,
-            )
-            if added.returncode != 0:
-                print(f"bench_compare: cannot check out {args.ref}: {added.stderr.strip()}")
+            try:
+                reference = stack.enter_context(checkout(args.ref))
+            except RuntimeError as error:
+                print(f"bench_compare: {error}")
                 return 2
             reference_path, label = str(reference), describe(reference)
+
+        def run(which):
+            if which == "this":
+                return run_bench(ROOT, str(ROOT), bench_arguments)
+            return run_bench(reference, reference_path, bench_arguments)
+
+        def report(round_, figures):
+            this, ref = figures["this"], figures["reference"]
+            print(
+                f"round {round_ + 1}: this {this['rate']:.4g} {this['unit']} (compile "
+                f"{this['compile_s']:.1f} s, load {this['load']:.2f}), reference "
+                f"{ref['rate']:.4g} {ref['unit']} (compile {ref['compile_s']:.1f} s, "
+                f"load {ref['load']:.2f}), ratio {this['rate'] / ref['rate']:.3f}",
+                flush=True,
+            )
+
         try:
-            pairs = []
-            for round_ in range(args.runs):
-                order = ["this", "reference"] if round_ % 2 == 0 else ["reference", "this"]
-                figures = {}
-                for which in order:
-                    if which == "this":
-                        figures[which] = run_bench(ROOT, str(ROOT), bench_arguments)
-                    else:
-                        figures[which] = run_bench(reference, reference_path, bench_arguments)
-                pairs.append(figures)
-                if not args.json:
-                    this, ref = figures["this"], figures["reference"]
-                    print(
-                        f"round {round_ + 1}: this {this['rate']:.4g} {this['unit']} (compile "
-                        f"{this['compile_s']:.1f} s, load {this['load']:.2f}), reference "
-                        f"{ref['rate']:.4g} {ref['unit']} (compile {ref['compile_s']:.1f} s, "
-                        f"load {ref['load']:.2f}), ratio {this['rate'] / ref['rate']:.3f}",
-                        flush=True,
-                    )
+            pairs = alternate(args.runs, run, None if args.json else report)
         except RuntimeError as error:
             print(f"bench_compare: {error}")
             return 2
-        finally:
-            if not args.installed:
-                subprocess.run(
-                    ["git", "worktree", "remove", "--force", str(reference)],
-                    cwd=ROOT,
-                    capture_output=True,
-                )
     ratios = [p["this"]["rate"] / p["reference"]["rate"] for p in pairs]
     compiles = [p["this"]["compile_s"] / p["reference"]["compile_s"] for p in pairs]
     unit = pairs[0]["this"]["unit"]

@@ -1,0 +1,115 @@
+"""The model-error loop's A/B: this checkout's `jaxcascade loop` against a reference
+commit's, alternated in fresh processes on the same machine.
+
+    python benchmarks/loop_compare.py REF [--runs 3] [--n 1024]
+
+The loop runs with its default settings on `loop_speed.py`'s synthetic input-delay
+records (`--n` samples each for estimation and validation: the declared cascade's
+residual fails, so every candidate of the library is fitted and scored). `REF` is
+checked out into a temporary `git worktree` (`bench_compare.checkout`) and imports its
+own copy of the package; this checkout's runs with `PYTHONPATH` set to it. Each of
+`--runs` rounds runs both, `JAXCASCADE_CACHE=off` (every program compiled), alternating
+which goes first.
+
+Prints each run's wall seconds (the whole process), programs compiled and effects
+added, then:
+- the ratio of this checkout's wall time to the reference's, pair by pair (min /
+  median / max);
+- whether every run added the same effects;
+- the largest difference between the two of a candidate's validation NRMSE, over the
+  candidates both scored: 0 up to rounding where the computation is the same,
+  larger where a refit ends elsewhere.
+
+Exit code 0 unless a loop failed (2).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import pathlib
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+
+from bench_compare import ROOT, alternate, checkout, describe
+from loop_speed import records
+
+
+def run_loop(folder: pathlib.Path, pythonpath: str, est: str, val: str) -> dict:
+    """One `jaxcascade loop EST --validate VAL --json` in a fresh process from `folder`."""
+    env = dict(os.environ, JAXCASCADE_CACHE="off", PYTHONPATH=pythonpath)
+    command = [sys.executable, "-m", "jaxcascade", "loop", est, "--validate", val]
+    command += ["--input", "u", "--output", "y", "--json"]
+    start = time.perf_counter()
+    done = subprocess.run(command, cwd=folder, env=env, capture_output=True, text=True)
+    seconds = time.perf_counter() - start
+    if done.returncode != 0:
+        raise RuntimeError(f"the loop in {folder} failed: {done.stderr.strip()[-1000:]}")
+    report = json.loads(done.stdout)
+    return {
+        "seconds": seconds,
+        "programs": report["programs_compiled"],
+        "effects": report["effect_added"],
+        "errors": {(c["round"], c["variant"]): c["error"] for c in report["candidates"]},
+        "load": os.getloadavg()[0],
+    }
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("ref", help="a commit to compare with")
+    parser.add_argument("--runs", type=int, default=3, help="rounds, each runs both (3)")
+    parser.add_argument("--n", type=int, default=1024, help="samples of each record (1024)")
+    args = parser.parse_args(argv)
+    if args.runs < 1:
+        parser.error("--runs must be at least 1")
+    with tempfile.TemporaryDirectory(prefix="loop_compare_") as scratch:
+        est, val, _ = records(pathlib.Path(scratch), args.n)
+        try:
+            with checkout(args.ref) as reference:
+                label = describe(reference)
+
+                def run(which):
+                    folder = ROOT if which == "this" else reference
+                    return run_loop(folder, str(folder), est, val)
+
+                def report(round_, figures):
+                    this, ref = figures["this"], figures["reference"]
+                    print(
+                        f"round {round_ + 1}: this {this['seconds']:.1f} s, "
+                        f"{this['programs']} programs, added {this['effects']}; reference "
+                        f"{ref['seconds']:.1f} s, {ref['programs']} programs, added "
+                        f"{ref['effects']}; ratio {this['seconds'] / ref['seconds']:.3f}",
+                        flush=True,
+                    )
+
+                pairs = alternate(args.runs, run, report)
+        except RuntimeError as error:
+            print(f"loop_compare: {error}")
+            return 2
+    ratios = [p["this"]["seconds"] / p["reference"]["seconds"] for p in pairs]
+    same = all(p["this"]["effects"] == p["reference"]["effects"] for p in pairs)
+    shared = [k for k in pairs[0]["this"]["errors"] if k in pairs[0]["reference"]["errors"]]
+    largest = max(
+        (abs(p["this"]["errors"][k] - p["reference"]["errors"][k]) for p in pairs for k in shared),
+        default=float("nan"),
+    )
+    print(
+        f"this ({describe(ROOT)}) / reference ({label}): wall time ratio "
+        f"{statistics.median(ratios):.3f} (median of {args.runs} pairs; min {min(ratios):.3f}, "
+        f"max {max(ratios):.3f}); load {min(p[w]['load'] for p in pairs for w in p):.1f}-"
+        f"{max(p[w]['load'] for p in pairs for w in p):.1f}"
+    )
+    print(
+        f"the same effects added in every run: {same}; largest difference of a candidate's "
+        f"validation NRMSE ({len(shared)} candidates in both): {largest:.3g}"
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
