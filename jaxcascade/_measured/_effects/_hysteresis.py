@@ -328,19 +328,20 @@ class BacklashFriction(_LinearPath):
         )
         span = _span(np.concatenate(us))
         level = float(np.mean([np.quantile(np.abs(y), 0.9) for y in ys])) or 1.0
-        best = None
-        for gap, travel in itertools.product(cls.gap_fractions, cls.travel_fractions):
-            start = [gap * span, level / (travel * span), level, level]
-            z0 = jnp.asarray(np.log(start).tolist() + [0.0])
-            z, cost = _fit_backlash_friction(
-                z0, groups, weights, tuple(cls.start_fractions), cls.max_steps
-            )
-            cost = float(cost)
-            if np.isfinite(cost) and (best is None or cost < best[1]):
-                best = (np.asarray(z), cost)
-        if best is None:
+        # every start in one call: its steps run side by side (`vmap`), one program
+        starts = [
+            np.log([gap * span, level / (travel * span), level, level]).tolist() + [0.0]
+            for gap, travel in itertools.product(cls.gap_fractions, cls.travel_fractions)
+        ]
+        zs, costs = _fit_backlash_friction(
+            jnp.asarray(starts), groups, weights, tuple(cls.start_fractions), cls.max_steps
+        )
+        costs = np.asarray(costs)
+        costs = np.where(np.isfinite(costs), costs, np.inf)
+        if not np.isfinite(costs).any():
             raise ValueError("backlash_friction: no start gave a finite fit")
-        z, cost = best
+        # the lowest cost; of equal ones the first start
+        z, cost = np.asarray(zs[int(np.argmin(costs))]), float(np.min(costs))
         # `least_squares`'s cost is the mean over the padded samples
         padded = sum(int(M.size) for _, _, M in groups)
         return np.concatenate([np.exp(z[:4]), z[4:]]), cost * padded / len(ys)
@@ -355,8 +356,9 @@ class BacklashFriction(_LinearPath):
 
 @jit(static_argnames=("starts", "max_steps"))
 def _fit_backlash_friction(z0, groups, weights, starts, max_steps):
-    """Levenberg-Marquardt of `BacklashFriction.fit` from `z0` on packed records
-    (`_compile.pack`): one compiled program per record buckets, not per call."""
+    """Levenberg-Marquardt of `BacklashFriction.fit` from each row of `z0` on packed
+    records (`_compile.pack`), the starts side by side (`vmap`): one compiled program
+    per record buckets and number of starts, not per call."""
     from ..._estimator._levenberg import least_squares
 
     def residual(z, args):
@@ -372,8 +374,11 @@ def _fit_backlash_friction(z0, groups, weights, starts, max_steps):
             ]
         )
 
-    z, cost, *_ = least_squares(residual, z0, None, max_steps=max_steps)
-    return z, cost
+    def one_start(z):
+        z, cost, *_ = least_squares(residual, z, None, max_steps=max_steps)
+        return z, cost
+
+    return jax.vmap(one_start)(z0)
 
 
 class BacklashFrictionContacts(BacklashFriction):
