@@ -1,11 +1,14 @@
 """The model-error loop's A/B: this checkout's `jaxcascade loop` against a reference
 commit's, alternated in fresh processes on the same machine.
 
-    python benchmarks/loop_compare.py REF [--runs 3] [--n 1024]
+    python benchmarks/loop_compare.py REF [--runs 3] [--n 1024] [--damper DATA]
 
 The loop runs with its default settings on `loop_speed.py`'s synthetic input-delay
 records (`--n` samples each for estimation and validation: the declared cascade's
-residual fails, so every candidate of the library is fitted and scored). `REF` is
+residual fails, so every candidate of the library is fitted and scored); with
+`--damper DATA` (the damper's records, `../shared/data/brfd`) it runs `loop_speed.py`'s
+damper run instead (`brfd_argv`: the 30 lb harmonic tests and Imperial Valley,
+validated on Kocaeli, `--decimate 8`, the damper's effect list). `REF` is
 checked out into a temporary `git worktree` (`bench_compare.checkout`) and imports its
 own copy of the package; this checkout's runs with `PYTHONPATH` set to it. Each of
 `--runs` rounds runs both, `JAXCASCADE_CACHE=off` (every program compiled), alternating
@@ -36,14 +39,13 @@ import tempfile
 import time
 
 from bench_compare import ROOT, alternate, checkout, describe
-from loop_speed import records
+from loop_speed import brfd_argv, records
 
 
-def run_loop(folder: pathlib.Path, pythonpath: str, est: str, val: str) -> dict:
-    """One `jaxcascade loop EST --validate VAL --json` in a fresh process from `folder`."""
+def run_loop(folder: pathlib.Path, pythonpath: str, argv: list[str]) -> dict:
+    """One `jaxcascade ARGV` (a loop with `--json`) in a fresh process from `folder`."""
     env = dict(os.environ, JAXCASCADE_CACHE="off", PYTHONPATH=pythonpath)
-    command = [sys.executable, "-m", "jaxcascade", "loop", est, "--validate", val]
-    command += ["--input", "u", "--output", "y", "--json"]
+    command = [sys.executable, "-m", "jaxcascade", *argv]
     start = time.perf_counter()
     done = subprocess.run(command, cwd=folder, env=env, capture_output=True, text=True)
     seconds = time.perf_counter() - start
@@ -64,18 +66,25 @@ def main(argv=None) -> int:
     parser.add_argument("ref", help="a commit to compare with")
     parser.add_argument("--runs", type=int, default=3, help="rounds, each runs both (3)")
     parser.add_argument("--n", type=int, default=1024, help="samples of each record (1024)")
+    parser.add_argument("--damper", metavar="DATA", help="the damper run on DATA instead")
     args = parser.parse_args(argv)
     if args.runs < 1:
         parser.error("--runs must be at least 1")
+    if args.damper and not pathlib.Path(args.damper, "characterization").is_dir():
+        parser.error(f"--damper: {args.damper} does not hold the damper's records")
     with tempfile.TemporaryDirectory(prefix="loop_compare_") as scratch:
-        est, val, _ = records(pathlib.Path(scratch), args.n)
+        if args.damper:
+            loop = brfd_argv(str(pathlib.Path(args.damper).resolve()), pathlib.Path(scratch))
+        else:
+            est, val, _ = records(pathlib.Path(scratch), args.n)
+            loop = ["loop", est, "--validate", val, "--input", "u", "--output", "y", "--json"]
         try:
             with checkout(args.ref) as reference:
                 label = describe(reference)
 
                 def run(which):
                     folder = ROOT if which == "this" else reference
-                    return run_loop(folder, str(folder), est, val)
+                    return run_loop(folder, str(folder), loop)
 
                 def report(round_, figures):
                     this, ref = figures["this"], figures["reference"]

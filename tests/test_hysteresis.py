@@ -167,6 +167,45 @@ def test_backlash_friction_effect_recovers_its_parameters(name):
     assert float(fitted.offset) == pytest.approx(0.1, abs=0.02)
 
 
+def test_backlash_friction_fit_keeps_the_best_of_its_starts_fitted_one_at_a_time():
+    # The starts run side by side in one call (`vmap`); the result must be the one each
+    # start fitted on its own gives, the lowest cost kept: the same parameters and cost.
+    import itertools
+
+    from jaxcascade._estimator._levenberg import least_squares
+    from jaxcascade._measured._effects._hysteresis import BacklashFriction, backlash_friction
+
+    truth = BacklashFriction(*(jnp.asarray(v) for v in (0.08, 30.0, 2.3, 2.0, 0.1)))
+    rng = np.random.default_rng(5)
+    u = scipy.signal.lfilter([0.05], [1, -0.95], np.cumsum(rng.normal(size=600)))
+    u = 0.4 * (u - u.mean()) / np.abs(u - u.mean()).max()
+    y = np.asarray(truth.parallel(jnp.asarray(u))) + 0.05 * rng.normal(size=u.size)
+    theta, cost = BacklashFriction.fit([(u, y)])
+
+    fractions = BacklashFriction.start_fractions
+    span = float(np.quantile(u, 0.995) - np.quantile(u, 0.005))
+    level = float(np.quantile(np.abs(y), 0.9))
+
+    def residual(z, args):
+        g, k, up, lo = jnp.exp(z[:4])
+        return (z[4] + backlash_friction(jnp.asarray(u), g, k, up, lo, fractions) - y) / u.size**0.5
+
+    singles = []
+    for gap, travel in itertools.product(
+        BacklashFriction.gap_fractions, BacklashFriction.travel_fractions
+    ):
+        z0 = jnp.asarray(
+            np.log([gap * span, level / (travel * span), level, level]).tolist() + [0.0]
+        )
+        z, c, *_ = least_squares(residual, z0, None, max_steps=BacklashFriction.max_steps)
+        singles.append((float(c), np.concatenate([np.exp(np.asarray(z[:4])), np.asarray(z[4:])])))
+    best_cost, best_theta = min(singles, key=lambda pair: pair[0])
+    # `least_squares`'s cost is the mean of the squared residuals, (e / sqrt(T))^2 here;
+    # `fit`'s the mean squared error
+    assert cost == pytest.approx(best_cost * u.size, rel=1e-9)
+    np.testing.assert_allclose(theta, best_theta, rtol=1e-7)
+
+
 def test_dahl_reaches_its_level():
     from jaxcascade._measured._effects._operators import dahl
 
