@@ -7,7 +7,6 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 import pytest
-import scipy.stats
 
 from jaxcascade._compile import bucket_length as bucket
 from jaxcascade._measured._effects import (
@@ -30,8 +29,6 @@ from jaxcascade._measured._effects import (
     simulate_with_switches,
 )
 from jaxcascade._measured._initial_state import (
-    LEVEL,
-    _choose,
     initialise,
     innovations_from,
     rest_state,
@@ -204,26 +201,3 @@ def test_compilation_is_bounded_by_structure_and_bucket(monkeypatch):
     y = _simulate_from(other, u, rest_state(other, u))[0]
     scored(other, u, y, 80, grid=(0.0, 1.0), max_steps=20)
     assert eqx.debug.get_num_traces(counted) == 1
-
-
-def test_of_fits_the_noise_cannot_tell_apart_the_one_nearest_the_state_from_rest_is_kept():
-    # n = 50 samples, a state of dimension 3: the noise variance estimated from the
-    # lowest cost is 50 / 47 of it, and a fit is within the noise where its sum of
-    # squares exceeds the lowest by at most the chi-square quantile of 3 times that.
-    n, d, lowest = 50, 3, 1.0
-    margin = scipy.stats.chi2.ppf(LEVEL, d) * lowest / (n - d)  # in mean squared error
-    warm = jnp.zeros(d)
-    z = jnp.asarray([[3.0, 0, 0], [0.5, 0, 0], [0.1, 0, 0], [0.0, 2, 0]])
-
-    def kept(cost):
-        return int(_choose(jnp.asarray(cost), z, warm, n))
-
-    # the nearest fit within the margin is kept over the lowest one
-    assert kept([lowest, lowest + 0.99 * margin, lowest + 1.01 * margin, 9.0]) == 1
-    # beyond the margin the lowest cost wins, however near the state from rest
-    assert kept([lowest, lowest + 1.01 * margin, lowest + 2 * margin, 9.0]) == 0
-    # a fit that is not finite is never kept, and all within the margin: the nearest
-    assert kept([lowest, lowest, lowest, jnp.nan]) == 2
-    assert kept([jnp.inf, lowest, lowest * 1.5, jnp.nan]) == 1
-    # an exact fit (no noise to speak of): only fits as exact are its equals
-    assert kept([0.0, 1e-12, 1e-30, 1e-20]) == 0

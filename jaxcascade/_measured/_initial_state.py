@@ -24,14 +24,13 @@ score covers `[start, stop)`.
   from rest up to `start - n`, and for each effect with positions a grid over their
   admissible range (operators are non-smooth in their state, so a local fit from one
   start can stop at a kink), each also with the backlash output that gives the measured
-  output at the first sample (held, the backlash is flat in the linear block's state).
-  Kept: of the fits whose cost the noise cannot tell from the lowest, the state nearest
-  the one from rest (`_choose`). A quiet window can leave the state undetermined: a held
-  backlash output and operator positions at the edges of their range that cancel
-  match it as well as the state from rest does, and carry the samples after it off;
-  the samples before the scored ones cannot tell them apart, the state from rest
-  (what the record's own input did) can. The noise model's innovations over the
-  scored samples use the residuals of the `n` initialisation samples as their past.
+  output at the first sample (held, the backlash is flat in the linear block's state);
+  the best fit is kept. The noise model's innovations over the scored samples use the
+  residuals of the `n` initialisation samples as their past. Samples where the system
+  hardly moves (an earthquake record's quiet start) do not determine an operator's
+  state: fits of many starts match them about equally and score the samples after
+  them very differently (`docs/loop.md`, "Initialised scoring"); a longer `n` that
+  reaches motion is the remedy, not a rule among the starts.
 - `scored`: NRMSE (`_metrics.score`) over `[start, stop)`, initialised and from rest
   (the whole record simulated from rest, scored on the same samples), and the same for
   the one-step prediction error (the innovations).
@@ -49,7 +48,6 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import scipy.stats
 from jax.flatten_util import ravel_pytree
 from jaxtyping import Array, Float
 
@@ -65,9 +63,6 @@ from ._effects._base import EffectState, ExtendedModel, backlash_of, recent
 # admissible range (0: against the lower limit, 1: the upper one).
 GRID = (0.0, 1 / 6, 2 / 6, 3 / 6, 4 / 6, 5 / 6, 1.0)
 MAX_STEPS = 60
-# Fits within this quantile of the noise's chi-square of the best are indistinguishable
-# (`_choose`).
-LEVEL = 0.95
 
 
 class CascadeState(eqx.Module):
@@ -237,22 +232,6 @@ class _Fit(eqx.Module):
     innovations_from_rest: Array
 
 
-def _choose(cost, z, z_warm, n: int):
-    """The index of the kept fit among the starts' (`cost`: mean squared errors over the
-    `n` samples, `z`: the fitted free states, one per row): of the fits whose cost the
-    noise cannot tell from the lowest, the one nearest `z_warm`, the state from rest
-    (module docstring). Indistinguishable: a sum of squares within the `LEVEL` quantile
-    of chi-square with the state's dimension `d` times the residual variance, estimated
-    from the best fit as `n * cost / (n - d)`."""
-    cost = jnp.where(jnp.isfinite(cost), cost, jnp.inf)
-    lowest = jnp.min(cost)
-    d = z.shape[1]
-    variance = lowest * n / max(n - d, 1)
-    near = cost <= lowest + float(scipy.stats.chi2.ppf(LEVEL, d)) * variance / n
-    distance = jnp.sum((z - z_warm) ** 2, axis=1)
-    return jnp.argmin(jnp.where(near & jnp.isfinite(cost), distance, jnp.inf))
-
-
 @exported
 def _initialise(model: ExtendedModel, u, y, first, n: int, grid: tuple, max_steps: int):
     """One compiled program per model structure, padded length, `n` and settings."""
@@ -282,7 +261,7 @@ def _fit(model: ExtendedModel, u, y, first, n: int, grid: tuple, max_steps: int)
     z, cost, status, _ = jax.vmap(
         lambda z0: least_squares(residual, z0, None, max_steps=max_steps)
     )(starts)
-    best = _choose(cost, z, z_warm, n)
+    best = jnp.argmin(jnp.where(jnp.isfinite(cost), cost, jnp.inf))
     state = _with_free(warm, unravel(z[best]))
     y_shifted = simulate_from(model, _shifted(u, first), state)[0]
     # the noise past before `first` is zero (nothing was simulated before it); the
