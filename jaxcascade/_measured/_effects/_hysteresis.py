@@ -336,12 +336,13 @@ class BacklashFriction(_LinearPath):
         zs, costs = _fit_backlash_friction(
             jnp.asarray(starts), groups, weights, tuple(cls.start_fractions), cls.max_steps
         )
-        costs = np.asarray(costs)
+        # on the host: indexing the device arrays would compile programs of its own
+        zs, costs = np.asarray(zs), np.asarray(costs)
         costs = np.where(np.isfinite(costs), costs, np.inf)
         if not np.isfinite(costs).any():
             raise ValueError("backlash_friction: no start gave a finite fit")
         # the lowest cost; of equal ones the first start
-        z, cost = np.asarray(zs[int(np.argmin(costs))]), float(np.min(costs))
+        z, cost = zs[int(np.argmin(costs))], float(np.min(costs))
         # `least_squares`'s cost is the mean over the padded samples
         padded = sum(int(M.size) for _, _, M in groups)
         return np.concatenate([np.exp(z[:4]), z[4:]]), cost * padded / len(ys)
