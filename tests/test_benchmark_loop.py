@@ -132,7 +132,7 @@ def test_loop_on_ced_scores_every_test_set_in_its_unit(capsys, tmp_path):
     """The declared cascade alone (`--max-effects 0`): the benchmark's records, its split,
     its n_init and unit, the published baselines beside the figures."""
     argv = ["loop", "--benchmark", "CED", "--data", str(ROOT), "--max-effects", "0"]
-    argv += ["--retries", "0", "--json", "--quiet", "--report", str(tmp_path)]
+    argv += ["--retries", "0", "--json", "--quiet", "--report", str(tmp_path), "--no-figures"]
     assert main(argv) == 0
     out = json.loads(capsys.readouterr().out)
     bench = out["benchmark"]

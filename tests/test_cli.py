@@ -196,7 +196,7 @@ def test_loop_on_several_records_with_a_window(capsys, tmp_path):
     argv = ["loop", paths[0], paths[1], "--validate", paths[2], "--input", "u", "--output", "y"]
     argv += ["--window", "100:400", "--max-effects", "0", "--json", "--quiet"]
     argv += ["--test", paths[3], "--test-window", "200:500"]
-    argv += ["--report", str(tmp_path / "report")]
+    argv += ["--report", str(tmp_path / "report"), "--no-figures"]
     assert main(argv) == 0
     result = json.loads(capsys.readouterr().out)
 

@@ -134,14 +134,21 @@ def test_interrupted_loop_resumes_to_the_uninterrupted_result(records, tmp_path,
     other = [records[1], records[0]]  # other records, same options
     assert "records" in _one_line_exit_2(capsys, _argv(other, report, "--resume"))
 
-    # --resume: the finished fits loaded, the rest fitted, the uninterrupted result
-    assert main(_argv(records, report, "--resume")) == 0
+    # --resume: the finished fits loaded, the rest fitted, the uninterrupted result;
+    # --no-figures (not an option of the computation) leaves the report's PNG files out
+    assert main(_argv(records, report, "--resume", "--no-figures")) == 0
     err = capsys.readouterr().err
     assert "the declared cascade's fit loaded from its checkpoint" in err
     assert "round 1, candidate 1 of 2: output_offset" in err and "loaded" in err
     assert "round 1, candidate 2 of 2: output_drift" in err
     _same_results(json.loads((report / "report.json").read_text()), expected)
     assert not (report / "checkpoints").exists()
+    assert len(list(whole.rglob("*.png"))) > 10 and not list(report.rglob("*.png"))
+    text, drawn = (report / "report.md").read_text(), (whole / "report.md").read_text()
+    assert "![" in drawn and "![" not in text
+    # the same score lines for every record, the figure links aside
+    scores = [line for line in drawn.splitlines() if line.startswith("- estimation, ")]
+    assert scores and all(line.rstrip() in text for line in scores)
 
 
 def test_refusals_are_one_line(records, tmp_path, capsys):
@@ -158,7 +165,7 @@ def test_refusals_are_one_line(records, tmp_path, capsys):
 
 def test_overwrite_starts_afresh(records, tmp_path, capsys):
     Checkpoints(tmp_path / "checkpoints").start(identity([np.zeros(3)], {"other": 1}))
-    assert main(_argv(records, tmp_path, "--overwrite", "--max-effects", "0")) == 0
+    assert main(_argv(records, tmp_path, "--overwrite", "--max-effects", "0", "--no-figures")) == 0
     assert "resuming" not in capsys.readouterr().err
     assert not (tmp_path / "checkpoints").exists()
     assert json.loads((tmp_path / "report.json").read_text())["effect_added"] == []

@@ -99,7 +99,7 @@ def test_the_loop_pools_its_validation_records(tmp_path, capsys):
         paths.append(str(path))
     argv = ["loop", paths[0], "--validate", paths[1], paths[2], "--input", "u"]
     argv += ["--output", "y", "--max-effects", "0", "--quiet", "--json"]
-    argv += ["--report", str(tmp_path / "report")]
+    argv += ["--report", str(tmp_path / "report"), "--no-figures"]
     assert main(argv) == 0
     summary = json.loads(capsys.readouterr().out)
     full = json.loads((tmp_path / "report" / "report.json").read_text())

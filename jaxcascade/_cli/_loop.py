@@ -5,12 +5,15 @@ models and the ARX peer), `report.md`, `candidates.csv`, the measured versus sim
 validation output before and after (`compare.png`), and the residual tests before and
 after (`residual_before_*.png`, `residual_after_*.png`), and the final model as a model
 file (`model.json`, `_model_file`: `jaxcascade simulate` applies it to new records).
+Each record's figure is `records/<k>-<role>.png`. `--no-figures` writes the same report
+without the PNG files (on short records drawing them takes much of the loop's time).
 While the loop runs, every finished fit and round is kept in `DIR/checkpoints/`
 (`_loop_resume`: `--resume`, `--overwrite`, Ctrl-C).
 """
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import pathlib
 import sys
@@ -618,12 +621,13 @@ def _run_loop(args, checkpoints) -> int:
         roles = [("estimation", r) for r in estimation]
         roles += [("validation", r) for r in scored_records[0]]
         roles += [("test", r) for r in scored_records[1]]
-        figures = _record_figures(saved, roles, folder, args.init_samples)
+        figures = _record_figures(saved, roles, folder, args.init_samples, args.figures)
         (folder / "report.md").write_text(_markdown(full, command) + figures)
         import pandas as pd
 
         pd.DataFrame(full["candidates"]).to_csv(folder / "candidates.csv", index=False)
         pd.DataFrame(full["scores"]).to_csv(folder / "scores.csv", index=False)
+    if folder is not None and args.figures:
         # the loop's own (first) validation record: the output's difference when integrating
         shown = validations[0]
         units = _units(args.output or "y", scaling.method)
@@ -659,35 +663,35 @@ def _run_loop(args, checkpoints) -> int:
     return 0
 
 
-def _record_figures(saved, roles, folder, init_samples) -> str:
+def _record_figures(saved, roles, folder, init_samples, draw: bool = True) -> str:
     """One figure per record, `records/<k>-<role>.png`: measured against the final model
     (initialised on the `init_samples` samples before its scored part, and from rest) in
     the record's unit against time in seconds, with fit %, NRMSE and RMSE in the unit
     (`_model_file.SavedModel.compare`, `_plot._comparison`); returns the report's section
-    that shows them."""
+    that shows them. `draw` False: the section's figures without the PNG files."""
     from .._plot._comparison import plot_comparison
 
-    (folder / "records").mkdir(exist_ok=True)
-    lines = [
-        "",
-        "## Every record: measured against the final model",
-        "",
-        "In the record's unit against time in seconds; the state set on the shaded "
-        "samples, then simulated (`initialised`), and simulated from rest.",
-        "",
-    ]
+    lines = ["", "## Every record: measured against the final model", ""]
+    if draw:
+        (folder / "records").mkdir(exist_ok=True)
+        lines += [
+            "In the record's unit against time in seconds; the state set on the shaded "
+            "samples, then simulated (`initialised`), and simulated from rest.",
+            "",
+        ]
     for k, (role, record) in enumerate(roles):
         c = saved.compare(record, init_samples)
         unit = record.output_unit or record.output_column
         name = f"records/{k:02d}-{role}.png"
-        title = f"{role} record {_name(record)}: measured vs the final model"
-        plot_comparison(c, folder / name, title=title, units=unit)
+        if draw:
+            title = f"{role} record {_name(record)}: measured vs the final model"
+            plot_comparison(c, folder / name, title=title, units=unit)
         s = c.score
         lines.append(
             f"- {role}, {_name(record)}: NRMSE {s.error:.4g} initialised ({s.error_from_rest:.4g} "
             f"from rest), RMSE {s.rmse:.4g} {unit}, period "
             + (f"{record.sample_period:g} s" if record.sample_period else "unknown (samples)")
-            + f"  \n  ![{role} {_name(record)}]({name})"
+            + (f"  \n  ![{role} {_name(record)}]({name})" if draw else "")
         )
     return "\n".join(lines) + "\n"
 
@@ -1144,6 +1148,13 @@ def add_parser(subparsers) -> None:
         metavar="DIR",
         help="folder for the report and figures; the loop keeps its finished fits in "
         "DIR/checkpoints/ while it runs (see --resume)",
+    )
+    parser.add_argument(
+        "--figures",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="draw the report's figures (default); --no-figures writes the report's "
+        "tables and text without the PNG files, faster",
     )
     add_resume_arguments(parser)
     parser.add_argument("--json", action="store_true", help="print the JSON summary")
