@@ -29,7 +29,7 @@ score covers `[start, stop)`.
   residuals of the `n` initialisation samples as their past. Samples where the system
   hardly moves (an earthquake record's quiet start) do not determine an operator's
   state: fits of many starts match them about equally and score the samples after
-  them very differently (`docs/loop.md`, "Initialised scoring"); a longer `n` that
+  them very differently (`docs/loop.md`, on scoring); a longer `n` that
   reaches motion is the remedy, not a rule among the starts.
 - `scored`: NRMSE (`_metrics.score`) over `[start, stop)`, initialised and from rest
   (the whole record simulated from rest, scored on the same samples), and the same for
