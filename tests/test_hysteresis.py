@@ -190,6 +190,10 @@ def test_backlash_friction_fit_keeps_the_best_of_its_starts_fitted_one_at_a_time
         g, k, up, lo = jnp.exp(z[:4])
         return (z[4] + backlash_friction(jnp.asarray(u), g, k, up, lo, fractions) - y) / u.size**0.5
 
+    # one compiled program for every start, run one start at a time
+    single = jax.jit(
+        lambda z0: least_squares(residual, z0, None, max_steps=BacklashFriction.max_steps)
+    )
     singles = []
     for gap, travel in itertools.product(
         BacklashFriction.gap_fractions, BacklashFriction.travel_fractions
@@ -197,7 +201,7 @@ def test_backlash_friction_fit_keeps_the_best_of_its_starts_fitted_one_at_a_time
         z0 = jnp.asarray(
             np.log([gap * span, level / (travel * span), level, level]).tolist() + [0.0]
         )
-        z, c, *_ = least_squares(residual, z0, None, max_steps=BacklashFriction.max_steps)
+        z, c, *_ = single(z0)
         singles.append((float(c), np.concatenate([np.exp(np.asarray(z[:4])), np.asarray(z[4:])])))
     best_cost, best_theta = min(singles, key=lambda pair: pair[0])
     # `least_squares`'s cost is the mean of the squared residuals, (e / sqrt(T))^2 here;
