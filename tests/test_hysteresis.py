@@ -180,7 +180,7 @@ def test_backlash_friction_fit_keeps_the_best_of_its_starts_fitted_one_at_a_time
     u = scipy.signal.lfilter([0.05], [1, -0.95], np.cumsum(rng.normal(size=600)))
     u = 0.4 * (u - u.mean()) / np.abs(u - u.mean()).max()
     y = np.asarray(truth.parallel(jnp.asarray(u))) + 0.05 * rng.normal(size=u.size)
-    theta, cost = BacklashFriction.fit([(u, y)])
+    theta, cost, status = BacklashFriction.fit([(u, y)])
 
     fractions = BacklashFriction.start_fractions
     span = float(np.quantile(u, 0.995) - np.quantile(u, 0.005))
@@ -192,7 +192,9 @@ def test_backlash_friction_fit_keeps_the_best_of_its_starts_fitted_one_at_a_time
 
     # one compiled program for every start, run one start at a time
     single = jax.jit(
-        lambda z0: least_squares(residual, z0, None, max_steps=BacklashFriction.max_steps)
+        lambda z0: least_squares(
+            residual, z0, None, max_steps=BacklashFriction.max_steps, ftol=BacklashFriction.ftol
+        )
     )
     singles = []
     for gap, travel in itertools.product(
@@ -201,9 +203,11 @@ def test_backlash_friction_fit_keeps_the_best_of_its_starts_fitted_one_at_a_time
         z0 = jnp.asarray(
             np.log([gap * span, level / (travel * span), level, level]).tolist() + [0.0]
         )
-        z, c, *_ = single(z0)
-        singles.append((float(c), np.concatenate([np.exp(np.asarray(z[:4])), np.asarray(z[4:])])))
-    best_cost, best_theta = min(singles, key=lambda pair: pair[0])
+        z, c, code, _ = single(z0)
+        theta_single = np.concatenate([np.exp(np.asarray(z[:4])), np.asarray(z[4:])])
+        singles.append((float(c), theta_single, int(code)))
+    best_cost, best_theta, best_status = min(singles, key=lambda triple: triple[0])
+    assert status == best_status
     # `least_squares`'s cost is the mean of the squared residuals, (e / sqrt(T))^2 here;
     # `fit`'s the mean squared error
     assert cost == pytest.approx(best_cost * u.size, rel=1e-9)

@@ -79,6 +79,31 @@ def test_rejected_steps_and_the_budget():
         np.testing.assert_allclose(z, expected, rtol=1e-10, atol=1e-12)
 
 
+def test_the_cost_test_ends_the_fit_at_a_step_that_hardly_lowers_the_loss():
+    # `ftol`: the iterates are the plain fit's; the fit ends, `converged`, at the first
+    # accepted step that lowers the loss by at most ftol times it, before the Cauchy test
+    z0 = jnp.asarray([-1.2, 1.0])
+    run = jax.jit(
+        lambda z, budget, ftol: least_squares(_rosenbrock, z, None, max_steps=budget, ftol=ftol),
+        static_argnums=(1, 2),
+    )
+    plain = run(z0, 200, None)
+    assert int(plain[2]) == int(jc.Status.converged)
+    ftol = 0.2  # Rosenbrock from the usual start: the first such step is the 13th
+    z, cost, status, steps = run(z0, 200, ftol)
+    assert int(status) == int(jc.Status.converged) and int(steps) < int(plain[3])
+    # the plain fit's iterate after as many steps
+    np.testing.assert_array_equal(z, run(z0, int(steps), None)[0])
+    # the losses of the plain fit step by step: the last change, the stopping step's, is
+    # a fall of at most ftol of the loss, and no earlier accepted step's is
+    losses = [float(run(z0, k, None)[1]) for k in range(1, int(steps) + 1)]
+    changes = [(a, b) for a, b in zip(losses, losses[1:], strict=False) if a != b]
+    assert changes[-1][0] - changes[-1][1] <= ftol * changes[-1][0]
+    assert all(a - b > ftol * a for a, b in changes[:-1])
+    # off by default: the same iterates as without the argument
+    np.testing.assert_array_equal(plain[0], least_squares(_rosenbrock, z0, None, max_steps=200)[0])
+
+
 def test_no_step_allowed_is_the_starts_cost():
     z, cost, status, steps = least_squares(_rosenbrock, jnp.asarray([-1.2, 1.0]), None, max_steps=0)
     assert float(cost) == pytest.approx(12.1, rel=1e-14)

@@ -139,7 +139,9 @@ def levenberg_marquardt(
     return z, jnp.where(jnp.isfinite(mean), mean, jnp.inf), status, steps
 
 
-def least_squares(residual, z0, args, *, max_steps: int = 100, rtol=1e-8, atol=1e-10):
+def least_squares(
+    residual, z0, args, *, max_steps: int = 100, rtol=1e-8, atol=1e-10, ftol: float | None = None
+):
     """Optimistix's Levenberg-Marquardt (`optx.LevenbergMarquardt`: damped Gauss-Newton
     steps in a classical trust region, its Cauchy termination) on any residual
     `residual(z, args)` from `z0`, computed on the normal equations; never raises. The
@@ -164,7 +166,10 @@ def least_squares(residual, z0, args, *, max_steps: int = 100, rtol=1e-8, atol=1
     change: the step is accepted and the Cauchy test decides, as it does in optimistix
     when the coin falls the other way. (Without this, a sum of two exponentials took 36
     steps where optimistix took 18, shrinking the trust region until the step was
-    zero.) A failed factorisation counts as a rejected step. With optimistix's the
+    zero.) A failed factorisation counts as a rejected step. `ftol` (None: off, as in
+    optimistix) adds SciPy's cost test: an accepted step that lowers the loss by at
+    most `ftol` times it also ends the fit, `converged` (for residuals with kinks, where
+    steps keep moving along a flat cost). With optimistix's the
     loop's cold run on its synthetic input-delay records (`benchmarks/loop_speed.py`)
     took about twice as long, with the same decisions.
 
@@ -218,6 +223,8 @@ def least_squares(residual, z0, args, *, max_steps: int = 100, rtol=1e-8, atol=1
         cauchy = jnp.max(jnp.abs(delta) / (atol + rtol * jnp.abs(trial))) < 1
         cauchy &= jnp.max(jnp.abs(r_new - r) / (atol + rtol * jnp.abs(r_new))) < 1
         status = jnp.where(first & ~finite, Status.diverged, status)
+        if ftol is not None:  # an accepted step that hardly lowers the loss ends the fit
+            cauchy |= loss - loss_new <= ftol * loss
         status = jnp.where(accept & cauchy & ~first, Status.converged, status)
 
         def pick(new, old):

@@ -56,6 +56,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from ..._compile import jit, pack, pad
+from ..._status import Status
 from ._base import (
     Effect,
     EffectState,
@@ -265,6 +266,11 @@ class BacklashFriction(_LinearPath):
     gap_fractions: ClassVar[tuple[float, ...]] = (0.01, 0.03, 0.1)
     travel_fractions: ClassVar[tuple[float, ...]] = (0.01, 0.04)
     max_steps: ClassVar[int] = 200
+    # A start's fit also ends (converged) after an accepted step that lowers its cost by
+    # less than this fraction of it (`least_squares`' `ftol`): the operator's kinks keep
+    # the step-size test from passing while the cost has stopped falling, and the starts
+    # run side by side until the last one ends.
+    ftol: ClassVar[float] = 1e-10
     # The stiffness enters as |stiffness| + FLOOR (kept off zero, where the slack's
     # travel gap / stiffness is undefined).
     FLOOR: ClassVar[float] = 1e-9
@@ -315,10 +321,11 @@ class BacklashFriction(_LinearPath):
         return low * ones, high * ones
 
     @classmethod
-    def fit(cls, records) -> tuple[np.ndarray, float]:
+    def fit(cls, records) -> tuple[np.ndarray, float, int]:
         """Output-error fit to the targets of `records` `[(u, target), ...]` jointly
         (each record's squared error weighted by 1/length): parameters
-        `(gap, stiffness, upper, lower, offset)` and the weighted mean squared error."""
+        `(gap, stiffness, upper, lower, offset)`, the weighted mean squared error and the
+        kept start's `Status` code (`converged` or `max_iterations`)."""
         us = [np.asarray(r[0], float) for r in records]
         ys = [np.asarray(r[1], float) for r in records]
         groups = pack(us, ys)
@@ -333,8 +340,13 @@ class BacklashFriction(_LinearPath):
             np.log([gap * span, level / (travel * span), level, level]).tolist() + [0.0]
             for gap, travel in itertools.product(cls.gap_fractions, cls.travel_fractions)
         ]
-        zs, costs = _fit_backlash_friction(
-            jnp.asarray(starts), groups, weights, tuple(cls.start_fractions), cls.max_steps
+        zs, costs, statuses = _fit_backlash_friction(
+            jnp.asarray(starts),
+            groups,
+            weights,
+            tuple(cls.start_fractions),
+            cls.max_steps,
+            cls.ftol,
         )
         # on the host: indexing the device arrays would compile programs of its own
         zs, costs = np.asarray(zs), np.asarray(costs)
@@ -342,24 +354,29 @@ class BacklashFriction(_LinearPath):
         if not np.isfinite(costs).any():
             raise ValueError("backlash_friction: no start gave a finite fit")
         # the lowest cost; of equal ones the first start
-        z, cost = zs[int(np.argmin(costs))], float(np.min(costs))
+        best = int(np.argmin(costs))
+        z, cost, status = zs[best], float(costs[best]), int(np.asarray(statuses)[best])
         # `least_squares`'s cost is the mean over the padded samples
         padded = sum(int(M.size) for _, _, M in groups)
-        return np.concatenate([np.exp(z[:4]), z[4:]]), cost * padded / len(ys)
+        return np.concatenate([np.exp(z[:4]), z[4:]]), cost * padded / len(ys), status
 
     @classmethod
     def fit_records(cls, model, records):
-        theta, _ = cls.fit([(r[0], r[2]) for r in records])
+        theta, _, status = cls.fit([(r[0], r[2]) for r in records])
         effect = cls(*(jnp.asarray(float(v)) for v in theta))
         g, k, up, lo, _ = theta
-        return effect, f"{cls.name}:gap={g:.3g},k={k:.3g},levels={up:.3g}/{lo:.3g}"
+        label = f"{cls.name}:gap={g:.3g},k={k:.3g},levels={up:.3g}/{lo:.3g}"
+        if status != Status.converged:  # the label says where the fit stopped short
+            label += f",{Status(status).name} ({cls.max_steps} steps)"
+        return effect, label
 
 
-@jit(static_argnames=("starts", "max_steps"))
-def _fit_backlash_friction(z0, groups, weights, starts, max_steps):
+@jit(static_argnames=("starts", "max_steps", "ftol"))
+def _fit_backlash_friction(z0, groups, weights, starts, max_steps, ftol):
     """Levenberg-Marquardt of `BacklashFriction.fit` from each row of `z0` on packed
     records (`_compile.pack`), the starts side by side (`vmap`): one compiled program
-    per record buckets and number of starts, not per call."""
+    per record buckets and number of starts, not per call. Returns each start's
+    parameters, cost and `Status` code."""
     from ..._estimator._levenberg import least_squares
 
     def residual(z, args):
@@ -376,8 +393,8 @@ def _fit_backlash_friction(z0, groups, weights, starts, max_steps):
         )
 
     def one_start(z):
-        z, cost, *_ = least_squares(residual, z, None, max_steps=max_steps)
-        return z, cost
+        z, cost, status, _ = least_squares(residual, z, None, max_steps=max_steps, ftol=ftol)
+        return z, cost, status
 
     return jax.vmap(one_start)(z0)
 
