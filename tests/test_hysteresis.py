@@ -214,6 +214,23 @@ def test_backlash_friction_fit_keeps_the_best_of_its_starts_fitted_one_at_a_time
     np.testing.assert_allclose(theta, best_theta, rtol=1e-7)
 
 
+def test_backlash_friction_label_says_when_its_fit_ran_out_of_steps(monkeypatch):
+    # a status is a claim: a kept start that stopped at the step budget says so in the
+    # candidate's label; a converged one adds nothing
+    from jaxcascade._measured._effects._hysteresis import BacklashFriction
+
+    truth = BacklashFriction(*(jnp.asarray(v) for v in (0.08, 30.0, 2.3, 2.0, 0.1)))
+    rng = np.random.default_rng(5)
+    u = 0.4 * np.sin(np.linspace(0, 12 * np.pi, 400))
+    y = np.asarray(truth.parallel(jnp.asarray(u))) + 0.05 * rng.normal(size=u.size)
+    records = [(u, None, y)]
+    _, label = BacklashFriction.fit_records(None, records)
+    assert "max_iterations" not in label and BacklashFriction.fit([(u, y)])[2] == 0
+    monkeypatch.setattr(BacklashFriction, "max_steps", 2)
+    _, label = BacklashFriction.fit_records(None, records)
+    assert label.endswith(",max_iterations (2 steps)")
+
+
 def test_dahl_reaches_its_level():
     from jaxcascade._measured._effects._operators import dahl
 
