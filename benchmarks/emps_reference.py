@@ -36,11 +36,14 @@ from __future__ import annotations
 import argparse
 import datetime
 import pathlib
-import subprocess
 import sys
 import time
 
 import numpy as np
+
+sys.path.insert(0, str(pathlib.Path(__file__).parent))
+import bench_history  # noqa: E402
+import loop_speed  # noqa: E402
 
 # The velocity's unit inside the fit (m per sample): the parameters are of order one.
 VELOCITY_UNIT = 1e-4
@@ -171,9 +174,7 @@ def main(argv=None) -> int:
     out = pathlib.Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     table.to_csv(out.with_suffix(".csv"), index=False)
-    commit = subprocess.run(
-        ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=False
-    ).stdout.strip()
+    commit = bench_history.commit()  # "-dirty" where the package differs from HEAD
     published = bench.published.get("test", {})
     shown = table.copy()
     for column in ("fit_rmse", "train_rmse", "test_rmse", "largest_pole"):
@@ -197,9 +198,7 @@ def main(argv=None) -> int:
         "for the velocity criterion, mm for the position); `friction`, `offset`: fc and "
         "c in m per sample.",
         "",
-        "| " + " | ".join(shown.columns) + " |",
-        "|" + "---|" * len(shown.columns),
-        *("| " + " | ".join(str(v) for v in row) + " |" for row in shown.itertuples(index=False)),
+        loop_speed.markdown(shown),
         "",
         "Published (Champneys et al. 2024, this split): "
         + ", ".join(f"{k} {v:g}" for k, v in published.items())
