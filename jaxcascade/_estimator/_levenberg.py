@@ -223,9 +223,10 @@ def least_squares(
         cauchy = jnp.max(jnp.abs(delta) / (atol + rtol * jnp.abs(trial))) < 1
         cauchy &= jnp.max(jnp.abs(r_new - r) / (atol + rtol * jnp.abs(r_new))) < 1
         status = jnp.where(first & ~finite, Status.diverged, status)
+        done = cauchy
         if ftol is not None:  # an accepted step that hardly lowers the loss ends the fit
-            cauchy |= loss - loss_new <= ftol * loss
-        status = jnp.where(accept & cauchy & ~first, Status.converged, status)
+            done = cauchy | (loss - loss_new <= ftol * loss)
+        status = jnp.where(accept & done & ~first, Status.converged, status)
 
         def pick(new, old):
             return jnp.where(accept, new, old)
