@@ -73,9 +73,11 @@ from ._operators import (
     backlash_friction_limits,
     dahl,
     dahl_from,
+    normal_equations,
     pi_basis,
     pi_basis_from,
     ridge,
+    ridge_solve,
     slack_map,
     stop_operator,
     stop_operators,
@@ -139,13 +141,12 @@ def cross_validate(structures, features, records, regularisations=REGULARISATION
     table = []
     for structure in structures:
         X = [features(structure, f[0]) for f in folds]
+        # each fold's normal equations once (`ridge` sums the same terms in order)
+        terms = [normal_equations(*fold) for fold in zip(X, targets, w, strict=True)]
         for lam in regularisations:
             errors = []
             for k in range(len(X)):
-                keep = [i for i in range(len(X)) if i != k]
-                theta = ridge(
-                    [X[i] for i in keep], [targets[i] for i in keep], [w[i] for i in keep], lam
-                )
+                theta = ridge_solve([t for i, t in enumerate(terms) if i != k], lam)
                 errors.append(
                     np.mean((targets[k] - X[k] @ theta) ** 2) / (np.var(targets[k]) or 1.0)
                 )

@@ -161,6 +161,25 @@ def lugre(u, dt, sigma0, sigma1, sigma2, fc_pos, fc_neg, fs_pos, fs_neg, vs):
     return out
 
 
+def normal_equations(X, y, w=1.0) -> tuple[np.ndarray, np.ndarray]:
+    """One record's terms of `ridge`'s normal equations: `(X'wX, X'wy)`."""
+    X = np.asarray(X)
+    return X.T @ (X * np.reshape(w, (-1, 1))), X.T @ (np.asarray(y) * w)
+
+
+def ridge_solve(terms, regularisation: float = 1e-6) -> np.ndarray:
+    """`ridge` from the records' `normal_equations`, summed in their order (so that a
+    cross-validation that forms each record's terms once gets `ridge`'s numbers bit
+    for bit)."""
+    gram = sum(term[0] for term in terms)
+    rhs = sum(term[1] for term in terms)
+    size = gram.shape[0]
+    gram = gram + regularisation * np.trace(gram) / size * np.eye(size)
+    # minimum-norm where features vanish on these records (a threshold beyond the
+    # record's travel gives an all-zero column, and an all-zero Gram has no ridge)
+    return np.linalg.lstsq(gram, rhs, rcond=None)[0]
+
+
 def ridge(features, targets, weights=None, regularisation: float = 1e-6):
     """Weighted ridge least squares (host side): `argmin sum w (y - X theta)^2 + lambda
     |theta|^2` with `lambda = regularisation * trace(X'WX) / P` (scale-free).
@@ -169,19 +188,8 @@ def ridge(features, targets, weights=None, regularisation: float = 1e-6):
     weights `w_i` (scalars or arrays); one list entry per record.
     """
     weights = weights or [1.0] * len(features)
-    gram = sum(
-        np.asarray(X).T @ (np.asarray(X) * np.reshape(w, (-1, 1)))
-        for X, w in zip(features, weights, strict=True)
-    )
-    rhs = sum(
-        np.asarray(X).T @ (np.asarray(y) * w)
-        for X, y, w in zip(features, targets, weights, strict=True)
-    )
-    size = gram.shape[0]
-    gram = gram + regularisation * np.trace(gram) / size * np.eye(size)
-    # minimum-norm where features vanish on these records (a threshold beyond the
-    # record's travel gives an all-zero column, and an all-zero Gram has no ridge)
-    return np.linalg.lstsq(gram, rhs, rcond=None)[0]
+    terms = [normal_equations(X, y, w) for X, y, w in zip(features, targets, weights, strict=True)]
+    return ridge_solve(terms, regularisation)
 
 
 _LUGRE = ("sigma0", "sigma1", "sigma2", "fc_pos", "fc_neg", "fs_pos", "fs_neg", "vs")
