@@ -259,7 +259,10 @@ def _by_name(programs, top: int = 25):
 
     if programs.empty:
         return programs
-    cold = programs[(programs.case == "loop input_delay") & (programs.cache == "cold")]
+    loops = [case for case in programs.case.unique() if case.startswith("loop")]
+    if not loops:
+        return programs.iloc[:0]
+    cold = programs[(programs.case == loops[0]) & (programs.cache == "cold")]
     cold = cold[cold.repeat == cold.repeat.min()]
     table = (
         cold.groupby("program", as_index=False)[["programs", "xla_compile_s"]]
@@ -297,6 +300,12 @@ def main(argv=None) -> int:
     parser.add_argument("--n", type=int, default=1024)
     parser.add_argument("--repeats", type=int, default=1, help="cold/warm pairs per case")
     parser.add_argument("--brfd", default=None, help="../shared/data/brfd: add the damper run")
+    parser.add_argument(
+        "--cases",
+        default=None,
+        help="comma-separated cases to run among input_delay, fit and brfd (default: "
+        "input_delay and fit, and brfd where --brfd is given)",
+    )
     parser.add_argument("--child", default=None, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.child is not None:
@@ -320,6 +329,12 @@ def main(argv=None) -> int:
         }
         if args.brfd:
             cases["loop brfd"] = brfd_argv(args.brfd, folder / "brfd")
+        if args.cases:
+            keep = {f"loop {c}" if c != "fit" else c for c in args.cases.split(",")}
+            unknown = keep - set(cases)
+            if unknown:
+                parser.error(f"--cases: unknown or without its data: {sorted(unknown)}")
+            cases = {name: cli for name, cli in cases.items() if name in keep}
         load = os.getloadavg()[0]
         for repeat in range(args.repeats):
             for case, cli in cases.items():
@@ -383,6 +398,7 @@ def main(argv=None) -> int:
         "",
         f"`python benchmarks/loop_speed.py --n {args.n} --repeats {args.repeats}"
         + (f" --brfd {args.brfd}" if args.brfd else "")
+        + (f" --cases {args.cases}" if args.cases else "")
         + f"`, commit {commit or 'unknown'}, jaxcascade {jaxcascade.__version__}, "
         f"jax {jax.__version__}; {machine()}; load average {load:.2f} at the start.",
         "",
@@ -404,7 +420,8 @@ def main(argv=None) -> int:
         "",
         markdown(stages[stages.case.str.startswith("loop")]),
         "",
-        "## The cold loop's programs by name",
+        "## The cold loop's programs by name"
+        + (f" ({loops[0]})" if (loops := [c for c in cases if c.startswith("loop")]) else ""),
         "",
         "Each program as JAX names it (`jit(function)`, from JAX's compile log), summed "
         "over the loop's stages: how many were lowered and XLA's compile seconds "

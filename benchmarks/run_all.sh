@@ -15,7 +15,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 export JAXCASCADE_CACHE=${JAXCASCADE_CACHE:-off}   # compile times reported cold
-needs_shared_data=(loop stability backlash inputs nonlinear declared general_brfd)
+needs_shared_data=(loop stability backlash inputs nonlinear declared general_brfd speed_damper)
 shared_data() {  # the shared folder a step reads
     case $1 in
         nonlinear|declared) echo "${NLB_DATA:-../shared/data/nonlinear_benchmarks}" ;;
@@ -42,6 +42,10 @@ bench_robust() {  # issue 16: robust on example1, example2 and the random family
 }
 speed() {  # issue 33: where a loop's and a fit's time goes, cold and warm cache, per stage
     python benchmarks/loop_speed.py --out results/loop_speed
+}
+speed_damper() {  # issue 33: the same for one damper run (loop_speed.brfd_argv), cold and warm
+    python benchmarks/loop_speed.py --brfd "${BRFD_DATA:-../shared/data/brfd}" --cases brfd \
+        --out results/loop_speed_brfd
 }
 distributed() {  # issue 7: in-process vs 1 and 2 local Dask workers
     python benchmarks/distributed_throughput.py --realisations 2048 --n 2000 --workers 1,2 \
@@ -194,7 +198,7 @@ mutations() {  # issue 40: each deleted body (an effect, pem's iteration, robust
     # against the default-run tests that must catch it
     python benchmarks/mutation_check.py --out results/mutation_check
 }
-all=(bench profile bench_robust speed distributed robust sweeps literal efficiency effects_loop loop
+all=(bench profile bench_robust speed speed_damper distributed robust sweeps literal efficiency effects_loop loop
     stability backlash reproduce recursive inputs noise nonlinear stand_ins declared statuses general general_brfd
     slow_tests default_tests profile_tests mutations)
 needs() {  # whether step $1 reads ../shared/data
