@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from .._metrics import fit_percent, nrmse
+from .._metrics import fit_percent, score
 
 
 def plot_compare(
@@ -24,11 +24,11 @@ def plot_compare(
             time,
             simulated,
             lw=0.8,
-            label=f"{label}, from rest ({fit_percent(nrmse(y, simulated)):.1f} % fit)",
+            label=f"{label}, from rest ({fit_percent(score(y, simulated)):.1f} % fit)",
         )
         if arx is not None:
             ax.plot(
-                time, arx, lw=0.6, ls="--", label=f"ARX ({fit_percent(nrmse(y, arx)):.1f} % fit)"
+                time, arx, lw=0.6, ls="--", label=f"ARX ({fit_percent(score(y, arx)):.1f} % fit)"
             )
         if init is not None:
             ax.axvspan(*init, color="tab:orange", alpha=0.25, label="state initialisation")
