@@ -1,7 +1,7 @@
 """Issue 33: where a measured-data session's time goes (`jaxcascade loop`, `jaxcascade fit`).
 
     python benchmarks/loop_speed.py [--out results/loop_speed] [--n 1024] [--repeats 1]
-                                    [--brfd ../shared/data/brfd]
+                                    [--brfd ../shared/data/brfd] [--threads N]
 
 Each case runs the CLI in a fresh Python process twice: **cold** with an empty JAX
 persistent cache folder (`JAXCASCADE_CACHE`, `XDG_CACHE_HOME`), then **warm** with the
@@ -17,7 +17,9 @@ cache the cold run filled (what a user sees the second time). The cases:
   Imperial Valley earthquake, validated on Kocaeli, `--decimate 8`, the damper's effect
   list), through the same CLI.
 
-Inside the process JAX's monitoring events are summed: programs traced (`jaxpr_trace`),
+The loop cases run with the CLI's default `--threads` (2 candidates at once on a machine
+with two or more cores), or `--threads N`. Inside the process JAX's monitoring events
+are summed: programs traced (`jaxpr_trace`),
 lowered to StableHLO (`lowering`; `programs` counts them), compiled by XLA or loaded from
 the persistent cache (`compile_or_load`: JAX's backend-compile event covers both; of it,
 `cache_load` loading the `cache_hits`); `execution_and_host` is the rest of the wall time
@@ -42,6 +44,7 @@ import re
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 
 EVENTS = {
@@ -77,21 +80,31 @@ def child(argv: list[str]) -> dict:
 
     totals: dict[str, float] = {}
     stages: dict[str, dict[str, float]] = {}
-    where = ["other"]
+    # the stage each thread is in (the loop fits candidates in threads: `--threads`), the
+    # intervals of the outermost stage calls, and a lock for the tables
+    local = threading.local()
+    intervals: list[tuple[float, float]] = []
+    lock = threading.Lock()
+
+    def stack():
+        if not hasattr(local, "where"):
+            local.where = ["other"]
+        return local.where
 
     def add(stage, name, value):
-        for table in (totals, stages.setdefault(stage, {})):
-            table[name] = table.get(name, 0.0) + value
+        with lock:
+            for table in (totals, stages.setdefault(stage, {})):
+                table[name] = table.get(name, 0.0) + value
 
     def durations(event, seconds, **_):
         if event in EVENTS:
-            add(where[-1], EVENTS[event], seconds)
+            add(stack()[-1], EVENTS[event], seconds)
         if event in COUNTS:
-            add(where[-1], COUNTS[event], 1)
+            add(stack()[-1], COUNTS[event], 1)
 
     def counts(event, **_):
         if event in COUNTS:
-            add(where[-1], COUNTS[event], 1)
+            add(stack()[-1], COUNTS[event], 1)
 
     jax.monitoring.register_event_duration_secs_listener(durations)
     jax.monitoring.register_event_listener(counts)
@@ -104,12 +117,14 @@ def child(argv: list[str]) -> dict:
             message = record.getMessage()
             found = re.match(r"Compiling (\S+) with global shapes", message)
             if found:
-                entry = programs.setdefault(f"{where[-1]}|{found.group(1)}", {})
-                entry["programs"] = entry.get("programs", 0) + 1
+                with lock:
+                    entry = programs.setdefault(f"{stack()[-1]}|{found.group(1)}", {})
+                    entry["programs"] = entry.get("programs", 0) + 1
             found = re.match(r"Finished XLA compilation of (\S+) in ([\d.e+-]+) sec", message)
             if found:
-                entry = programs.setdefault(f"{where[-1]}|{found.group(1)}", {})
-                entry["xla_s"] = entry.get("xla_s", 0.0) + float(found.group(2))
+                with lock:
+                    entry = programs.setdefault(f"{stack()[-1]}|{found.group(1)}", {})
+                    entry["xla_s"] = entry.get("xla_s", 0.0) + float(found.group(2))
 
     jax.config.update("jax_log_compiles", True)
     logging.getLogger("jax").addHandler(Compiles())
@@ -117,6 +132,7 @@ def child(argv: list[str]) -> dict:
     def staged(function, stage):
         @functools.wraps(function)
         def call(*args, **kwargs):
+            where = stack()
             if where[-1] != "other":  # called inside another stage: that stage's time
                 return function(*args, **kwargs)
             where.append(stage)
@@ -125,7 +141,10 @@ def child(argv: list[str]) -> dict:
                 return function(*args, **kwargs)
             finally:
                 where.pop()
-                add(stage, "wall", time.perf_counter() - began)
+                ended = time.perf_counter()
+                add(stage, "wall", ended - began)
+                with lock:
+                    intervals.append((began, ended))
 
         return call
 
@@ -144,11 +163,21 @@ def child(argv: list[str]) -> dict:
         code = main(argv)
     wall = time.perf_counter() - began
     stages["other"] = stages.get("other", {})
-    stages["other"]["wall"] = wall - sum(
-        s.get("wall", 0.0) for k, s in stages.items() if k != "other"
-    )
+    # the wall time in which no thread was in a stage (stages in threads overlap)
+    staged, end = 0.0, -float("inf")
+    for a, b in sorted(intervals):
+        staged += max(0.0, b - max(a, end))
+        end = max(end, b)
+    stages["other"]["wall"] = wall - staged
+    threads = None
+    if argv[0] == "loop":
+        from jaxcascade._measured._loop import default_threads
+
+        given = [argv[i + 1] for i, a in enumerate(argv[:-1]) if a == "--threads"]
+        threads = int(given[-1]) if given else default_threads()
     return {
         "code": code,
+        "threads": threads,
         "wall": wall,
         "totals": totals,
         "stages": stages,
@@ -306,6 +335,12 @@ def main(argv=None) -> int:
         help="comma-separated cases to run among input_delay, fit and brfd (default: "
         "input_delay and fit, and brfd where --brfd is given)",
     )
+    parser.add_argument(
+        "--threads",
+        type=int,
+        default=None,
+        help="the loop cases' --threads (default: the CLI's default, 2 on two or more cores)",
+    )
     parser.add_argument("--child", default=None, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.child is not None:
@@ -329,6 +364,10 @@ def main(argv=None) -> int:
         }
         if args.brfd:
             cases["loop brfd"] = brfd_argv(args.brfd, folder / "brfd")
+        if args.threads is not None:
+            for name, cli in cases.items():
+                if cli[0] == "loop":
+                    cases[name] = [*cli, "--threads", str(args.threads)]
         if args.cases:
             keep = {f"loop {c}" if c != "fit" else c for c in args.cases.split(",")}
             unknown = keep - set(cases)
@@ -348,12 +387,13 @@ def main(argv=None) -> int:
                         "cache": state,
                         "repeat": repeat,
                         "process_s": round(result["process"], 2),
+                        "threads": result["threads"],
                         "command_s": round(result["wall"], 2),
                         "programs": int(t.get("programs", 0)),
                         "compiled": int(t.get("compiled", 0)),
                         "cache_hits": int(t.get("cache_hits", 0)),
                         **{f"{k}_s": round(t.get(k, 0.0), 2) for k in EVENTS.values()},
-                        "execution_and_host_s": round(result["wall"] - accounted, 2),
+                        "execution_and_host_s": round(max(0.0, result["wall"] - accounted), 2),
                         "cache_folder_mb": round(folder_size(cache) / 2**20, 1),
                     }
                     rows.append(row)
@@ -399,6 +439,7 @@ def main(argv=None) -> int:
         f"`python benchmarks/loop_speed.py --n {args.n} --repeats {args.repeats}"
         + (f" --brfd {args.brfd}" if args.brfd else "")
         + (f" --cases {args.cases}" if args.cases else "")
+        + (f" --threads {args.threads}" if args.threads is not None else "")
         + f"`, commit {commit or 'unknown'}, jaxcascade {jaxcascade.__version__}, "
         f"jax {jax.__version__}; {machine()}; load average {load:.2f} at the start.",
         "",
@@ -408,7 +449,12 @@ def main(argv=None) -> int:
         "`compile_or_load`: XLA compiling them or loading them "
         "from the persistent cache (`cache_hits` loaded, in `cache_load_s`; the CLI keeps "
         "every program in the cache, however quickly it compiled); "
-        "`execution_and_host`: the rest of the command's wall time; `cache_folder_mb`: the "
+        "`execution_and_host`: the rest of the command's wall time; `threads`: the loop's "
+        "`--threads` (candidates fitted at once; the CLI's default is 2 on two or more cores): "
+        "with 2 the events' seconds are summed over both threads and overlap each other and "
+        "the execution, `execution_and_host` is then the wall time less them, at least 0, "
+        "and each stage's `wall_s` below sums its calls' time over the threads (`other`: "
+        "the wall time in which no thread was in a stage); `cache_folder_mb`: the "
         "cache folder after the run; `process`: the whole "
         "process, Python's start and imports included. On a cold run the tracing that "
         "`jax.export` does for the kept programs (`_compile.exported`) sends no trace "

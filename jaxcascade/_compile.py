@@ -31,6 +31,7 @@ import hashlib
 import os
 import pathlib
 import pickle
+import threading
 
 import equinox as eqx
 import jax
@@ -124,6 +125,7 @@ _BACKEND_COMPILE = "/jax/core/compile/backend_compile_duration"
 _compiles = 0
 _listening = False
 _released_at = 0
+_counting = threading.Lock()  # the loop fits candidates in threads (`_loop`)
 
 # `bound`'s limits: programs compiled since the last release (a candidate of the loop
 # compiles 20-60, each holding tens of memory mappings on the damper's records), and
@@ -135,7 +137,8 @@ MAPPINGS = 16_000
 def _count(event: str, duration: float, **kwargs) -> None:
     global _compiles
     if event == _BACKEND_COMPILE:
-        _compiles += 1
+        with _counting:
+            _compiles += 1
 
 
 def compile_count() -> int:
@@ -192,13 +195,19 @@ def mappings() -> int | None:
         return None
 
 
-def bound(programs: int = PROGRAMS, mapped: int = MAPPINGS) -> bool:
-    """`release` when more than `programs` programs were compiled since the last
-    release, or the process holds more than `mapped` memory mappings; True when it
-    released. Called between the stages of a long host-side loop, it keeps what the
-    stages share compiled and the process's programs under a fixed bound."""
+def over_bound(programs: int = PROGRAMS, mapped: int = MAPPINGS) -> bool:
+    """Whether more than `programs` programs were compiled since the last release, or
+    the process holds more than `mapped` memory mappings (`bound` would release)."""
     count = mappings()
-    if compile_count() - _released_at > programs or (count is not None and count > mapped):
+    return compile_count() - _released_at > programs or (count is not None and count > mapped)
+
+
+def bound(programs: int = PROGRAMS, mapped: int = MAPPINGS) -> bool:
+    """`release` when `over_bound`; True when it released. Called between the stages of
+    a long host-side loop, it keeps what the stages share compiled and the process's
+    programs under a fixed bound. Never while another thread is tracing, compiling or
+    running a program: it frees what that thread is using."""
+    if over_bound(programs, mapped):
         release()
         return True
     return False
@@ -407,7 +416,8 @@ def _export(function, static, tree, leaves, where: pathlib.Path, key: str, check
         return None
     try:
         where.mkdir(parents=True, exist_ok=True)
-        partial = where / f"{key}.{os.getpid()}.partial"
+        # one partial file per process and thread (the loop fits candidates in threads)
+        partial = where / f"{key}.{os.getpid()}.{threading.get_ident()}.partial"
         partial.write_bytes(blob)
         partial.replace(where / f"{key}.bin")  # atomic: a reader sees all or nothing
         kept_files = list(where.glob("*.bin"))

@@ -467,6 +467,13 @@ def test_unwritable_folders_name_their_option(capsys, tmp_path):
     assert err.endswith("--decimate must be an integer >= 1, got 0.")
 
 
+def test_loop_threads_below_one_is_refused_before_reading(capsys, tmp_path):
+    missing = str(tmp_path / "missing.csv")  # never read: the option is refused first
+    loop = ["loop", missing, "--validate", missing, "--input", "u", "--output", "y"]
+    err = _one_line_error(capsys, [*loop, "--threads", "0"])
+    assert err.endswith("--threads must be an integer >= 1, got 0.")
+
+
 @pytest.mark.parametrize("command", ["reproduce", "sweep", "fit", "loop", "bench"])
 def test_every_help_ends_with_examples(capsys, command):
     with pytest.raises(SystemExit) as exit_:

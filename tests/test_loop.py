@@ -9,6 +9,8 @@ the backlash gaps is *exactly* a gap change (y + d is a backlash with cL + d and
 cR - d / mR), so the offset used here exceeds what the gaps can absorb.
 """
 
+import threading
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -229,6 +231,41 @@ def test_loop_compiles_a_bounded_set_of_programs():
         assert result.programs_compiled == counts[-1]
     assert counts[0] == counts[1]
     assert counts[1] <= 60
+
+
+def test_threads_give_the_loop_of_one_thread_bit_for_bit(monkeypatch):
+    from jaxcascade._measured import _loop
+
+    # A round's candidates fitted at once in threads (`_loop._Workers`, the CLI's
+    # default of 2): each runs the same programs on the same arrays as one at a time,
+    # so the decisions, every candidate's figures and the final model are the same bit
+    # for bit, whatever the number of threads (here more than the round's candidates).
+    model = ExtendedModel(TRUTH(), (OutputOffset(jnp.asarray(0.8)),), ARNoise.white())
+    (u, y), (u_val, y_val) = jaxcascade_record(model, 1, 500), jaxcascade_record(model, 2, 500)
+    library = ("output_offset", "output_drift", "dynamics_order")
+    reports, where = [], []
+    fit = _loop._fit_candidate
+
+    def fit_in(*args, **kwargs):  # which thread fits each candidate
+        where.append(threading.current_thread().name)
+        return fit(*args, **kwargs)
+
+    for threads in (1, 4):
+        monkeypatch.setattr(_loop, "_fit_candidate", fit_in)
+        result = model_error_loop(
+            u, y, u_val, y_val, jc.Orders(), base=TRUTH(), effects=library, threads=threads
+        )
+        report = result.to_dict()
+        report.pop("programs_compiled")
+        reports.append(report)
+    main = threading.main_thread().name
+    assert where[:3] == [main] * 3
+    assert all(name.startswith("jaxcascade-candidate") for name in where[3:])
+    assert reports[0]["effect_added"] == ["output_offset"]
+    assert [c["name"] for c in reports[0]["candidates"]] == list(library)  # one round
+    assert reports[1] == reports[0]
+    with pytest.raises(ValueError, match="threads"):
+        model_error_loop(u, y, u_val, y_val, jc.Orders(), base=TRUTH(), threads=0)
 
 
 def jaxcascade_record(model, seed, n):

@@ -135,8 +135,10 @@ def test_interrupted_loop_resumes_to_the_uninterrupted_result(records, tmp_path,
     assert "records" in _one_line_exit_2(capsys, _argv(other, report, "--resume"))
 
     # --resume: the finished fits loaded, the rest fitted, the uninterrupted result;
-    # --no-figures (not an option of the computation) leaves the report's PNG files out
-    assert main(_argv(records, report, "--resume", "--no-figures")) == 0
+    # --no-figures and --threads (not options of the computation: the runs above fit
+    # their candidates in the CLI's default threads) leave the report's PNG files out
+    # and fit one candidate at a time
+    assert main(_argv(records, report, "--resume", "--no-figures", "--threads", "1")) == 0
     err = capsys.readouterr().err
     assert "the declared cascade's fit loaded from its checkpoint" in err
     assert "round 1, candidate 1 of 2: output_offset" in err and "loaded" in err

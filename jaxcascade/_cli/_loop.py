@@ -381,7 +381,12 @@ def _run_loop(args, checkpoints) -> int:
 
     from .._estimator._robust import Robust
     from .._measured._arx import best_arx
-    from .._measured._loop import initialised_output, model_error_loop, simulated_output
+    from .._measured._loop import (
+        default_threads,
+        initialised_output,
+        model_error_loop,
+        simulated_output,
+    )
     from .._measured._scoring import score_record, verdict
     from .._plot._loop import plot_compare
     from .._plot._residuals import save_residual_figures
@@ -397,6 +402,8 @@ def _run_loop(args, checkpoints) -> int:
         raise CLIError(f"--min-gain must be in [0, 1), got {args.min_gain}.")
     if args.retries < 0:
         raise CLIError(f"--retries must be >= 0, got {args.retries}.")
+    if args.threads is not None and args.threads < 1:
+        raise CLIError(f"--threads must be an integer >= 1, got {args.threads}.")
     if args.init_samples is not None and args.init_samples < 0:
         raise CLIError(f"--init-samples must be >= 0, got {args.init_samples}.")
     if args.benchmark:
@@ -493,6 +500,7 @@ def _run_loop(args, checkpoints) -> int:
         min_gain=args.min_gain,
         key=jax.random.PRNGKey(args.seed),
         checkpoints=checkpoints,
+        threads=default_threads() if args.threads is None else args.threads,
     )
     full = result.to_dict()
     full["robust"] = {"retries": args.retries, "seed": args.seed}
@@ -1133,6 +1141,13 @@ def add_parser(subparsers) -> None:
         default=2,
         help="repeats of the robust fit's multi-start from fresh draws while its estimate "
         "fails the residual test (default 2)",
+    )
+    parser.add_argument(
+        "--threads",
+        type=int,
+        default=None,
+        help="candidates of a round fitted at once, in threads: the same results for any "
+        "number (default: 2 where the process may use two or more cores, else 1)",
     )
     parser.add_argument(
         "--integrate",

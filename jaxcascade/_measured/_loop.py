@@ -37,6 +37,7 @@
 from __future__ import annotations
 
 import dataclasses
+import os
 import time
 
 import equinox as eqx
@@ -46,7 +47,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array
 
-from .._compile import bound, compile_count, exported, filter_jit, pack, pad
+from .._compile import bound, compile_count, exported, filter_jit, over_bound, pack, pad
 from .._estimator._efficiency import standard_errors
 from .._estimator._levenberg import least_squares
 from .._estimator._refine import from_unconstrained, to_unconstrained
@@ -617,6 +618,7 @@ def model_error_loop(
     init_samples: int = 0,
     integrating: bool = False,
     checkpoints: Checkpoints | None = None,
+    threads: int = 1,
 ) -> LoopResult:
     """Run the loop (module docstring) on an estimation and a validation record.
 
@@ -656,7 +658,11 @@ def model_error_loop(
       errors); it also keeps where the loop is (`Checkpoints.where`) for an interrupted
       run's report. Progress (`progress`) says the round, the candidate, the time
       elapsed and an estimate of the round's remaining time.
+    - `threads`: candidates of a round fitted at once (`_Workers`); the results are the
+      same for any number.
     """
+    if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
+        raise ValueError(f"model_error_loop: threads must be an integer >= 1, got {threads!r}.")
     say = progress or (lambda message: None)
     store = Checkpoints() if checkpoints is None else checkpoints
     started = time.monotonic()
@@ -800,68 +806,67 @@ def model_error_loop(
 
         def announce(k, name, loaded, round_=round_, count=count):
             store.at("candidate", round=round_, k=k, n=count, candidate=name)
-            say(_progress_line(round_, k, count, name, loaded, started, fit_seconds))
+            say(_progress_line(round_, k, count, name, loaded, started, fit_seconds, threads))
 
-        for k, (name, action) in enumerate(todo, start=1):
-            item = f"round-{round_:02d}-{action}-{name}"
-            saved = store.load(item)
-            announce(k, name, saved is not None)
-            if saved is None:
-                began = time.monotonic()
-                fit = _fit_candidate(name, model, us, ys, records, action)
-                fit_seconds.append(time.monotonic() - began)
-            else:
-                fit = (
-                    None
-                    if saved["model"] is None
-                    else (model_from_dict(saved["model"]), saved["label"])
-                )
-            if fit is None:
-                store.save(item, {"round": round_, "name": name, "action": action, "model": None})
-                say(
-                    f"  {name:<24} no start on these records, or no fit of its kind "
-                    "(Effect.admissible); not scored"
-                )
-                continue
-            c = _score_candidate(name, fit[1], fit[0], *fit_against, **judged_by, action=action)
-            if saved is None:
-                store.save(item, _candidate_checkpoint(c))
-            round_candidates.append(c)
-            # Each candidate compiles programs of its own structure (about a hundred
-            # memory mappings each, measured on the damper): freed past a bound, so
-            # that a later candidate or loop of the same structure reuses them.
-            bound()
-            say(
-                f"  {c.label:<24} error {c.error:.4g}  t {c.t:7.2f}  "
-                f"{'significant' if c.significant else ''}"
-            )
+        tasks = [(k, name, action) for k, (name, action) in enumerate(todo, start=1)]
         if noise_tried:
-            item = f"round-{round_:02d}-add-{ARNoise.name}"
-            saved = store.load(item)
-            announce(count, ARNoise.name, saved is not None)
-            if saved is None:
-                began = time.monotonic()
-                noise_model, p_value = _fit_noise(model, us, ys, records)
-                fit_seconds.append(time.monotonic() - began)
-            else:
-                noise_model, p_value = model_from_dict(saved["model"]), saved["p_value"]
-            c = _score_noise(
-                noise_model,
-                p_value,
-                current,
-                failed,
-                round_,
-                assess,
-                **judged_by,
-                noise_alpha=noise_alpha,
-            )
-            if saved is None:
-                store.save(item, {**_candidate_checkpoint(c), "p_value": p_value})
-            round_candidates.append(c)
-            say(
-                f"  {c.label:<24} prediction error {c.evaluation.prediction_error:.4g}  "
-                f"t {c.t:7.2f}  {'significant' if c.significant else ''}"
-            )
+            tasks.append((count, ARNoise.name, "noise"))
+        context = (fit_against, judged_by, noise_alpha)
+        # Up to `threads` candidates are fitted and scored at once (`_Workers`); each is
+        # announced, saved and reported here, in order. Programs are freed past the bound
+        # (`bound`: each candidate compiles programs of its own structure, about a hundred
+        # memory mappings each on the damper) only with no candidate in flight, so that a
+        # later candidate or loop of the same structure reuses them.
+        with _Workers(threads) as workers:
+            pending, queue, drain = [], iter(tasks), False
+            while True:
+                while not drain and len(pending) < workers.size:
+                    task = next(queue, None)
+                    if task is None:
+                        break
+                    k, name, action = task
+                    kind = "add" if action == "noise" else action
+                    item = f"round-{round_:02d}-{kind}-{name}"
+                    saved = store.load(item)
+                    future = workers.submit(_candidate_work, name, action, saved, context)
+                    pending.append((task, item, saved, future))
+                if not pending:
+                    break
+                (k, name, action), item, saved, future = pending.pop(0)
+                announce(k, name, saved is not None)
+                c, seconds, p_value = future.result()
+                if seconds is not None:
+                    fit_seconds.append(seconds)
+                if action == "noise":
+                    if saved is None:
+                        store.save(item, {**_candidate_checkpoint(c), "p_value": p_value})
+                    round_candidates.append(c)
+                    say(
+                        f"  {c.label:<24} prediction error "
+                        f"{c.evaluation.prediction_error:.4g}  t {c.t:7.2f}  "
+                        f"{'significant' if c.significant else ''}"
+                    )
+                    continue
+                if c is None:
+                    store.save(
+                        item, {"round": round_, "name": name, "action": action, "model": None}
+                    )
+                    say(
+                        f"  {name:<24} no start on these records, or no fit of its kind "
+                        "(Effect.admissible); not scored"
+                    )
+                    continue
+                if saved is None:
+                    store.save(item, _candidate_checkpoint(c))
+                round_candidates.append(c)
+                drain = drain or over_bound()
+                if drain and not pending:
+                    bound()
+                    drain = False
+                say(
+                    f"  {c.label:<24} error {c.error:.4g}  t {c.t:7.2f}  "
+                    f"{'significant' if c.significant else ''}"
+                )
         candidates += round_candidates
         store.at("round", round=round_)
         deterministic = [c for c in round_candidates if c.significant and c.name != ARNoise.name]
@@ -983,6 +988,91 @@ def _candidate(name, model, current, failed, round_, us, ys, records, assess, **
     return _score_candidate(
         name, label, fitted, model, current, failed, round_, us, ys, records, assess, **options
     )
+
+
+def default_threads() -> int:
+    """The loop's threads by default (`model_error_loop`'s `threads`): 2 where this
+    process may use two or more cores, else 1. Two, not more: each candidate's programs
+    are mostly compiled and run on one core, and more candidates at once hold more
+    programs in memory."""
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # no affinity on this system
+        cores = os.cpu_count() or 1
+    return 2 if cores >= 2 else 1
+
+
+def _candidate_work(name, action, saved, context):
+    """One candidate of a round: its fit (or `saved`, its checkpoint) and its score, in
+    any thread (`_Workers`). `action`: "add", "replace" or "noise" (the noise model).
+    Returns `(Candidate or None, seconds of the fit or None where loaded, the noise
+    model's p-value or None)`."""
+    fit_against, judged_by, noise_alpha = context
+    model, current, failed, round_, us, ys, records, assess = fit_against
+    began = time.monotonic()
+    if action == "noise":
+        if saved is None:
+            noise_model, p_value = _fit_noise(model, us, ys, records)
+        else:
+            noise_model, p_value = model_from_dict(saved["model"]), saved["p_value"]
+        seconds = None if saved is not None else time.monotonic() - began
+        c = _score_noise(
+            noise_model, p_value, current, failed, round_, assess, **judged_by,
+            noise_alpha=noise_alpha,
+        )  # fmt: skip
+        return c, seconds, p_value
+    if saved is None:
+        fit = _fit_candidate(name, model, us, ys, records, action)
+    else:
+        fit = None if saved["model"] is None else (model_from_dict(saved["model"]), saved["label"])
+    seconds = None if saved is not None else time.monotonic() - began
+    if fit is None:
+        return None, seconds, None
+    c = _score_candidate(name, fit[1], fit[0], *fit_against, **judged_by, action=action)
+    return c, seconds, None
+
+
+class _Deferred:
+    """A task of `_Workers(1)`: run when its result is asked for."""
+
+    def __init__(self, function, args):
+        self.function, self.args = function, args
+
+    def result(self):
+        return self.function(*self.args)
+
+
+class _Workers:
+    """Where a round's candidates run: with `threads` 1 each in the calling thread when
+    its result is asked for (in order, as before threads); with more, in a pool of that
+    many threads. Candidates are independent given the current model, and each runs the
+    same programs on the same arrays either way, so the results are the same bit for
+    bit; XLA compiles and runs programs outside Python's lock, so on a machine with
+    several cores one candidate's compiling and running overlaps another's. Leaving
+    the block (also on an error or Ctrl-C) waits for the candidates already running."""
+
+    def __init__(self, threads: int):
+        self.size = int(threads)
+        self.pool = None
+        if self.size > 1:
+            import concurrent.futures
+
+            self.pool = concurrent.futures.ThreadPoolExecutor(
+                self.size, thread_name_prefix="jaxcascade-candidate"
+            )
+
+    def submit(self, function, *args):
+        if self.pool is None:
+            return _Deferred(function, args)
+        return self.pool.submit(function, *args)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        if self.pool is not None:
+            self.pool.shutdown(wait=True, cancel_futures=True)
+        return False
 
 
 def _fit_candidate(name, model, us, ys, records, action="add"):
@@ -1141,14 +1231,15 @@ def _key_data(key) -> list:
     return np.asarray(key).tolist()
 
 
-def _progress_line(round_, k, n, name, loaded, started, fit_seconds) -> str:
+def _progress_line(round_, k, n, name, loaded, started, fit_seconds, threads=1) -> str:
     """`round R, candidate k of n: NAME (elapsed, estimate of the round's remaining time:
-    the mean time of this run's fits so far times the candidates left)`."""
+    the mean time of this run's fits so far times the candidates left, over the threads
+    that fit them)`."""
     line = f"round {round_}, candidate {k} of {n}: {name} ({_duration(time.monotonic() - started)}"
     if loaded:
         return f"{line} elapsed; its fit loaded from its checkpoint)"
     if fit_seconds:
-        left = float(np.mean(fit_seconds)) * (n - k + 1)
+        left = float(np.mean(fit_seconds)) * (n - k + 1) / max(1, min(threads, n - k + 1))
         return f"{line} elapsed, about {_duration(left)} left in this round)"
     return f"{line} elapsed)"
 
