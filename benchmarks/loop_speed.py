@@ -265,7 +265,8 @@ def markdown(frame) -> str:
     columns = [str(c) for c in frame.columns]
     lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
     for row in frame.itertuples(index=False):
-        lines.append("| " + " | ".join(str(v) for v in row) + " |")
+        cells = ["-" if str(v) == "<NA>" else str(v) for v in row]  # a missing value
+        lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 
@@ -425,6 +426,7 @@ def main(argv=None) -> int:
                             }
                         )
     table = pd.DataFrame(rows)
+    table["threads"] = table["threads"].astype("Int64")  # none for `fit`
     stages = pd.DataFrame(stage_rows)
     table.to_csv(out.with_suffix(".csv"), index=False)
     stages.to_csv(out.parent / f"{out.name}_stages.csv", index=False)
