@@ -820,7 +820,7 @@ def model_error_loop(
         with _Workers(threads) as workers:
             pending, queue, drain = [], iter(tasks), False
             while True:
-                while not drain and len(pending) < workers.size:
+                while not drain and len(pending) < workers.ahead:
                     task = next(queue, None)
                     if task is None:
                         break
@@ -1053,6 +1053,9 @@ class _Workers:
 
     def __init__(self, threads: int):
         self.size = int(threads)
+        # candidates submitted at most: two more than the threads, so that a long one
+        # (reported before the others) leaves no thread idle behind it
+        self.ahead = self.size + 2 if self.size > 1 else 1
         self.pool = None
         if self.size > 1:
             import concurrent.futures
