@@ -976,20 +976,6 @@ def check_scored_length(length: int, init_samples: int, where: str) -> None:
         )
 
 
-def _candidate(name, model, current, failed, round_, us, ys, records, assess, **options):
-    """Fit the effect `name` added to `model` (`action="add"`), or in place of its cascade
-    (`action="replace"`: the effect's path from the input plus a fitted output offset,
-    the model's other effects kept), and score it on the validation record."""
-    action = options.get("action", "add")
-    fit = _fit_candidate(name, model, us, ys, records, action)
-    if fit is None:
-        return None
-    fitted, label = fit
-    return _score_candidate(
-        name, label, fitted, model, current, failed, round_, us, ys, records, assess, **options
-    )
-
-
 def default_threads() -> int:
     """The loop's threads by default (`model_error_loop`'s `threads`): 2 where this
     process may use two or more cores, else 1. Two, not more: each candidate's programs
@@ -1011,21 +997,22 @@ def _candidate_work(name, action, saved, context):
     model, current, failed, round_, us, ys, records, assess = fit_against
     began = time.monotonic()
     if action == "noise":
-        if saved is None:
-            noise_model, p_value = _fit_noise(model, us, ys, records)
-        else:
-            noise_model, p_value = model_from_dict(saved["model"]), saved["p_value"]
-        seconds = None if saved is not None else time.monotonic() - began
+        noise_model, p_value = (
+            _fit_noise(model, us, ys, records)
+            if saved is None
+            else (model_from_dict(saved["model"]), saved["p_value"])
+        )
+    elif saved is None:
+        fit = _fit_candidate(name, model, us, ys, records, action)
+    else:
+        fit = None if saved["model"] is None else (model_from_dict(saved["model"]), saved["label"])
+    seconds = time.monotonic() - began if saved is None else None
+    if action == "noise":
         c = _score_noise(
             noise_model, p_value, current, failed, round_, assess, **judged_by,
             noise_alpha=noise_alpha,
         )  # fmt: skip
         return c, seconds, p_value
-    if saved is None:
-        fit = _fit_candidate(name, model, us, ys, records, action)
-    else:
-        fit = None if saved["model"] is None else (model_from_dict(saved["model"]), saved["label"])
-    seconds = None if saved is not None else time.monotonic() - began
     if fit is None:
         return None, seconds, None
     c = _score_candidate(name, fit[1], fit[0], *fit_against, **judged_by, action=action)
@@ -1079,8 +1066,10 @@ class _Workers:
 
 
 def _fit_candidate(name, model, us, ys, records, action="add"):
-    """The fit of `_candidate`: `(fitted model, label)`, or None where the effect has no
-    start on these records or no fit that `Effect.admissible` accepts."""
+    """The effect `name` fitted added to `model` (`action="add"`), or in place of its
+    cascade (`action="replace"`: the effect's path from the input plus a fitted output
+    offset, the model's other effects kept): `(fitted model, label)`, or None where the
+    effect has no start on these records or no fit that `Effect.admissible` accepts."""
     effect = EFFECTS[name]
     if action == "replace":
         offset = float(np.mean(np.concatenate([np.asarray(y) for y in ys])))
@@ -1129,7 +1118,7 @@ def _fit_candidate(name, model, us, ys, records, action="add"):
 def _score_candidate(
     name, label, fitted, model, current, failed, round_, us, ys, records, assess, **options
 ):
-    """The score of `_candidate`: the fitted model on the validation record, and the
+    """The score of a fitted candidate: the fitted model on the validation record, and the
     Diebold-Mariano test against the current model (deterministic: a resumed loop scores
     a loaded fit again, `_loop_checkpoint`)."""
     t_threshold, min_gain = options.get("t_threshold", 3.0), options.get("min_gain", 0.02)
@@ -1163,18 +1152,13 @@ def _score_candidate(
     )
 
 
-def _noise_candidate(model, current, failed, round_, us, ys, records, assess, **options):
+def _fit_noise(model, us, ys, records):
     """The autoregressive noise model fitted on the estimation records' residuals of
     `model`, the model then refitted on the prediction error it defines (an output-error
     fit is biased by coloured noise, and the whitened residual shows that bias to the
-    input tests), judged on the validation record's one-step-ahead prediction error."""
-    noise_model, p_value = _fit_noise(model, us, ys, records)
-    return _score_noise(noise_model, p_value, current, failed, round_, assess, **options)
-
-
-def _fit_noise(model, us, ys, records):
-    """The fit of `_noise_candidate`: `(model with the noise model, p-value of the
-    likelihood-ratio test against white noise)`."""
+    input tests): `(model with the noise model, p-value of the likelihood-ratio test
+    against white noise)`. It is judged on the validation record's one-step-ahead
+    prediction error (`_score_noise`)."""
     noise, p_value = ARNoise.fit_records([r[2] for r in records])
     noise_model = model.with_(noise=noise)
     if noise.order and (model.cascade or model.effects):
@@ -1184,7 +1168,7 @@ def _fit_noise(model, us, ys, records):
 
 
 def _score_noise(noise_model, p_value, current, failed, round_, assess, **options):
-    """The score of `_noise_candidate`."""
+    """The score of the noise model's candidate (`_fit_noise`)."""
     noise = noise_model.noise
     evaluation = assess(noise_model)
     comparison = diebold_mariano(current.innovation, evaluation.innovation, "prediction")
