@@ -65,10 +65,12 @@ def compiler_options() -> dict:
 
 def jit(function=None, **kwargs):
     """`jax.jit` with `compiler_options()` where it compiles a program of its own, as a
-    decorator (with or without keyword arguments). Called on tracers (inside another
-    `jit`, `vmap` or `grad`) it is a plain `jax.jit`, whose options would not reach XLA
-    (the caller's program is compiled with the caller's options). The options are
-    looked up at the first call, not at import."""
+    decorator (with or without keyword arguments): called on arrays, or under an eager
+    `vmap` (which compiles the batched program as its own, `_own_program`). Inside
+    another `jit`, a `scan` or a `grad` it is a plain `jax.jit`, inlined into the
+    caller's program, which is compiled with the caller's options (JAX refuses options
+    on a nested `jit`). The options are looked up at the
+    first call, not at import."""
     if function is None:
         return functools.partial(jit, **kwargs)
 
@@ -77,22 +79,38 @@ def jit(function=None, **kwargs):
         options = compiler_options() if top else {}
         return jax.jit(function, compiler_options=options or None, **kwargs)
 
-    def top(args, kw) -> bool:
-        leaves = jax.tree_util.tree_leaves((args, kw))
-        return not any(isinstance(leaf, jax.core.Tracer) for leaf in leaves)
-
     @functools.wraps(function)
     def call(*args, **kw):
-        return compiled(top(args, kw))(*args, **kw)
+        return compiled(_own_program((args, kw)))(*args, **kw)
 
-    call.lower = lambda *args, **kw: compiled(top(args, kw)).lower(*args, **kw)
+    call.lower = lambda *args, **kw: compiled(_own_program((args, kw))).lower(*args, **kw)
     return call
+
+
+def _own_program(arguments) -> bool:
+    """Whether a `jit` called on `arguments` compiles a program of its own: its arguments
+    are arrays, or tracers of eager `vmap`s only (JAX compiles the batched program as its
+    own). Under any other transformation (`jit`, `scan`, `grad`, which stages the
+    function into a traced program) it is inlined. JAX says which transformations are
+    active only through internal functions: where they are missing or fail, tracers
+    count as inside a program (no options)."""
+    leaves = jax.tree_util.tree_leaves(arguments)
+    if not any(isinstance(leaf, jax.core.Tracer) for leaf in leaves):
+        return True
+    try:
+        from jax._src import core
+
+        stack = core.unsafe_get_trace_stack(core.trace_ctx.trace)
+        return all(type(trace).__name__ in ("EvalTrace", "BatchTrace") for trace in stack)
+    except Exception:  # another JAX: the safe answer
+        return False
 
 
 def filter_jit(function):
     """`equinox.filter_jit` with `compiler_options()` where it compiles a program of its
-    own (as `jit`: called on tracers it is a plain `filter_jit`, whose options would not
-    reach XLA). For functions of modules with static fields (a model, an effect)."""
+    own (as `jit`: inside another traced program it is a plain `filter_jit`, whose
+    options would not reach XLA). For functions of modules with static fields (a model,
+    an effect)."""
 
     @functools.cache
     def compiled(top: bool):
@@ -103,9 +121,7 @@ def filter_jit(function):
 
     @functools.wraps(function)
     def call(*args, **kw):
-        leaves = jax.tree_util.tree_leaves((args, kw))
-        top = not any(isinstance(leaf, jax.core.Tracer) for leaf in leaves)
-        return compiled(top)(*args, **kw)
+        return compiled(_own_program((args, kw)))(*args, **kw)
 
     return call
 

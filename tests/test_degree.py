@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from degree_one_reference import reference
 
+from jaxcascade._compile import jit
 from jaxcascade._estimator import estimator
 from jaxcascade._system._examples import example
 from jaxcascade._system._general_backlash import general_example, simulate_general
@@ -100,7 +101,7 @@ def test_literal_and_robust_fit_curved_branches_batched():
     truth = np.asarray(params.to_vector())
     for name in ("literal", "robust"):
         one = estimator(name)
-        fit = jax.jit(jax.vmap(lambda a, b, k, one=one: one(a, b, params.orders, key=k)))
+        fit = jit(jax.vmap(lambda a, b, k, one=one: one(a, b, params.orders, key=k)))
         solution = fit(u, y, keys)
         errors = np.max(np.abs(np.asarray(solution.params.to_vector()) - truth), axis=1)
         converged = np.asarray(solution.status) == 0
@@ -116,7 +117,7 @@ def test_pem_fits_curved_branches_batched():
     u = jax.vmap(lambda k: uniform_input(k, 1500))(keys)
     y = jax.vmap(lambda one: simulate(params, one))(u)
     pem = estimator("pem")
-    solution = jax.jit(jax.vmap(lambda a, b, k: pem(a, b, params.orders, key=k)))(u, y, keys)
+    solution = jit(jax.vmap(lambda a, b, k: pem(a, b, params.orders, key=k)))(u, y, keys)
     estimate, truth = (np.asarray(p.to_vector()) for p in (solution.params, params))
     errors = np.max(np.abs(estimate - truth), axis=1)
     assert np.all(np.asarray(solution.status) == 0) and np.all(errors < 1e-6), errors
@@ -232,7 +233,7 @@ def test_recursive_fits_curved_branches_on_line():
     u = jax.vmap(lambda k: uniform_input(k, 4000))(keys)
     y = jax.vmap(lambda one: simulate(params, one))(u)
     recursive = estimator("recursive", **NOISE_FREE)
-    solution = jax.jit(jax.vmap(lambda a, b: recursive(a, b, params.orders)))(u, y)
+    solution = jit(jax.vmap(lambda a, b: recursive(a, b, params.orders)))(u, y)
     estimate, truth = (np.asarray(p.to_vector()) for p in (solution.params, params))
     errors = np.max(np.abs(estimate - truth), axis=1)
     assert np.all(np.asarray(solution.status) == 0) and np.all(errors < 1e-6), errors

@@ -21,12 +21,13 @@ from jaxcascade import (
     measure,
     simulate,
 )
+from jaxcascade._compile import filter_jit
 from jaxcascade._estimator import _literal
 from jaxcascade._estimator._literal import voros_step
 
 # compiled: called eagerly, every `lax.scan` inside compiles a program of its own at
 # every call
-_voros_step = eqx.filter_jit(voros_step)
+_voros_step = filter_jit(voros_step)
 
 
 def _example1_record(seed=0, n=None):

@@ -3,12 +3,12 @@
 finite-difference Jacobian of the simulator; `pem_general` finds the AR noise model of
 coloured noise, is output error where the noise is white, and never raises."""
 
-import equinox as eqx
 import jax
 import numpy as np
 import pytest
 
 import jaxcascade as jc
+from jaxcascade._compile import filter_jit
 from jaxcascade._estimator._efficiency import crlb, fisher_information
 from jaxcascade._estimator._general_pem import pem_general
 from jaxcascade._estimator._general_refine import refine_general
@@ -22,8 +22,8 @@ from jaxcascade._system._simulate import add_noise
 
 # compiled: called eagerly, every `lax.scan` inside compiles a program of its own at
 # every call
-_crlb = eqx.filter_jit(crlb)
-_fisher_information = eqx.filter_jit(fisher_information)
+_crlb = filter_jit(crlb)
+_fisher_information = filter_jit(fisher_information)
 
 
 def _input(n, seed=0, amplitude=2.0):

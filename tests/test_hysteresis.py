@@ -9,6 +9,7 @@ import pytest
 import scipy.signal
 
 import jaxcascade as jc
+from jaxcascade._compile import jit
 from jaxcascade._measured._effects import EFFECTS, ExtendedModel, plain, simulate_extended
 from jaxcascade._measured._noise import ARNoise
 
@@ -138,7 +139,7 @@ def test_backlash_friction_is_traceable_and_differentiable():
     def cost(theta):
         return jnp.sum(backlash_friction(u, *theta, (-1.0, 1.0)) ** 2)
 
-    grad = jax.jit(jax.grad(cost))(jnp.array([0.1, 20.0, 2.0, 1.5]))
+    grad = jit(jax.grad(cost))(jnp.array([0.1, 20.0, 2.0, 1.5]))
     assert np.all(np.isfinite(np.asarray(grad))) and np.all(np.asarray(grad) != 0)
 
 
@@ -191,7 +192,7 @@ def test_backlash_friction_fit_keeps_the_best_of_its_starts_fitted_one_at_a_time
         return (z[4] + backlash_friction(jnp.asarray(u), g, k, up, lo, fractions) - y) / u.size**0.5
 
     # one compiled program for every start, run one start at a time
-    single = jax.jit(
+    single = jit(
         lambda z0: least_squares(
             residual, z0, None, max_steps=BacklashFriction.max_steps, ftol=BacklashFriction.ftol
         )

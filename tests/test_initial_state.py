@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from jaxcascade._compile import bucket_length as bucket
+from jaxcascade._compile import filter_jit
 from jaxcascade._measured._effects import (
     EFFECTS,
     BacklashFriction,
@@ -40,8 +41,8 @@ from jaxcascade._system._examples import example
 
 # compiled once per model structure: called eagerly, every `lax.scan` in them compiles
 # a program of its own at every call
-_simulate_from = eqx.filter_jit(simulate_from)
-_simulate_with_switches = eqx.filter_jit(simulate_with_switches)
+_simulate_from = filter_jit(simulate_from)
+_simulate_with_switches = filter_jit(simulate_with_switches)
 
 
 def _a(*values):

@@ -12,6 +12,7 @@ import optimistix as optx
 import pytest
 
 import jaxcascade as jc
+from jaxcascade._compile import jit
 from jaxcascade._estimator._levenberg import least_squares
 
 RTOL, ATOL = 1e-8, 1e-10  # the loop's tolerances (`least_squares`'s defaults)
@@ -57,7 +58,7 @@ def test_the_iterates_are_optimistix_levenberg_marquardt(residual, z0):
     z0 = jnp.asarray(z0, jnp.float64)
     expected, steps, result = _optimistix(residual, z0, 200)
     assert result == optx.RESULTS.successful  # the reference converged
-    z, cost, status, taken = jax.jit(lambda z: least_squares(residual, z, None, max_steps=200))(z0)
+    z, cost, status, taken = jit(lambda z: least_squares(residual, z, None, max_steps=200))(z0)
     assert int(status) == int(jc.Status.converged)
     # the same iterates; the last step may differ by one: at the minimum accepting the
     # step is a matter of rounding (`least_squares`'s docstring)
@@ -83,7 +84,7 @@ def test_the_cost_test_ends_the_fit_at_a_step_that_hardly_lowers_the_loss():
     # `ftol`: the iterates are the plain fit's; the fit ends, `converged`, at the first
     # accepted step that lowers the loss by at most ftol times it, before the Cauchy test
     z0 = jnp.asarray([-1.2, 1.0])
-    run = jax.jit(
+    run = jit(
         lambda z, budget, ftol: least_squares(_rosenbrock, z, None, max_steps=budget, ftol=ftol),
         static_argnums=(1, 2),
     )

@@ -197,8 +197,11 @@ def test_every_effect_of_the_library_has_an_undeclared_record():
 
 def test_loop_compiles_a_bounded_set_of_programs():
     # Issue 21: a loop over many estimation records compiles one program per model
-    # structure and record-length bucket, never one per record: the same count for 2
-    # and for 10 records of lengths in the same two buckets, under a fixed bound.
+    # structure and record-length bucket, never one per record. From nothing compiled,
+    # the loop on 2 records of two buckets compiles under a fixed bound; the loop on 10
+    # records of lengths in the same two buckets then compiles no more than that (only
+    # the programs whose batch of records has another size: one per record would be
+    # about five times as many).
     from jaxcascade._compile import compile_count, compiler_options, release
 
     # the XLA options' one-off probe (a tiny program, once per process) would otherwise
@@ -206,15 +209,19 @@ def test_loop_compiles_a_bounded_set_of_programs():
     compiler_options()
     model = ExtendedModel(TRUTH(), (OutputOffset(jnp.asarray(0.8)),), ARNoise.white())
 
-    def record(seed, n):
-        return jaxcascade_record(model, seed, n)
+    # the records: windows of one long record (a record of a new length simulated
+    # eagerly compiles its own operations: a second apiece)
+    u_all, y_all = (np.asarray(a) for a in jaxcascade_record(model, 0, 3200))
+    u_val, y_val = u_all[-400:], y_all[-400:]
 
-    u_val, y_val = record(99, 400)
+    def record(seed, n):
+        return u_all[200 * seed : 200 * seed + n], y_all[200 * seed : 200 * seed + n]
+
     counts = []
+    release()
     for lengths in ([150, 310], [150, 151, 152, 153, 154, 155, 300, 301, 305, 310]):
         records = [record(seed, n) for seed, n in enumerate(lengths)]
         base = TRUTH()
-        release()
         before = compile_count()
         result = model_error_loop(
             [u for u, _ in records],
@@ -229,8 +236,7 @@ def test_loop_compiles_a_bounded_set_of_programs():
         assert result.added == ["output_offset"]
         counts.append(compile_count() - before)
         assert result.programs_compiled == counts[-1]
-    assert counts[0] == counts[1]
-    assert counts[1] <= 60
+    assert 0 < counts[1] <= counts[0] <= 60, counts
 
 
 def test_threads_give_the_loop_of_one_thread_bit_for_bit(monkeypatch):

@@ -1,6 +1,5 @@
 """The normal equations of a step: the fused native kernel against the XLA reference."""
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -9,14 +8,15 @@ import pytest
 
 import jaxcascade
 from jaxcascade import CascadeParams, Orders, Status, example, initial_guess, measure
+from jaxcascade._compile import filter_jit
 from jaxcascade._estimator import _fused
 from jaxcascade._estimator._literal import voros_step
 from jaxcascade._estimator._normal_equations import normal_equations, resolve
 
 # compiled: called eagerly, every `lax.scan` inside compiles a program of its own at
 # every call
-_normal_equations = eqx.filter_jit(normal_equations)
-_voros_step = eqx.filter_jit(voros_step)
+_normal_equations = filter_jit(normal_equations)
+_voros_step = filter_jit(voros_step)
 
 fused = pytest.mark.skipif(not _fused.available(), reason=f"no fused kernel: {_fused.reason()}")
 

@@ -11,6 +11,7 @@ import scipy.signal
 import scipy.stats
 
 import jaxcascade as jc
+from jaxcascade._compile import jit
 from jaxcascade._estimator._efficiency import crlb, fisher_information, information_factor, jacobian
 from jaxcascade._experiment._noise_filter import (
     ar_from_unconstrained,
@@ -174,7 +175,7 @@ def test_prediction_error_refinement_fits_the_cascade_and_the_noise_model(bias):
     assert moved > 0.02 or bias == 0.0
 
 
-@jax.jit
+@jit
 def _pem_step(start, u, y):
     # pem's step 3 at its defaults (one compiled program for both starts above)
     from jaxcascade._estimator._pem import DEFAULTS, _refine

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 import jaxcascade as jc
+from jaxcascade._compile import jit
 from jaxcascade._estimator._basin import residual_statistic
 from jaxcascade._estimator._robust import _adaptive, _robust
 from jaxcascade._estimator._solution import PATH_ADAPTIVE, PATH_MULTISTART
@@ -39,7 +40,7 @@ def records():
 def stages(records):
     u = jnp.stack([r[0] for r in records])
     y = jnp.stack([r[1] for r in records])
-    return jax.jit(jax.vmap(lambda u, y: _adaptive(u, y, ORDERS, **STAGE)))(u, y)
+    return jit(jax.vmap(lambda u, y: _adaptive(u, y, ORDERS, **STAGE)))(u, y)
 
 
 def test_adaptive_path_accepts_an_easy_record(records, stages):
@@ -75,7 +76,7 @@ def test_batched_fit_takes_each_records_path(records):
     u = jnp.stack([records[0][0], records[1][0], records[0][0]])
     y = jnp.stack([records[0][1], records[1][1], records[0][1]])
     keys = jax.random.split(jax.random.PRNGKey(0), 3)
-    batched = jax.jit(jax.vmap(lambda u, y, k: _robust(u, y, ORDERS, k, **SMALL)))(u, y, keys)
+    batched = jit(jax.vmap(lambda u, y, k: _robust(u, y, ORDERS, k, **SMALL)))(u, y, keys)
     assert batched.path.tolist() == [PATH_ADAPTIVE, PATH_MULTISTART, PATH_ADAPTIVE]
     one = _robust(u[1], y[1], ORDERS, keys[1], **SMALL)
     assert int(one.path) == PATH_MULTISTART

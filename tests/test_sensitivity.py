@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 import jaxcascade as jc
+from jaxcascade._compile import jit
 from jaxcascade._estimator._sensitivity import output_jacobian
 from jaxcascade._system._model import CascadeParams
 from jaxcascade._system._simulate import signals
@@ -28,10 +29,10 @@ def test_output_jacobian_equals_jacfwd(orders, draw):
         return signals(CascadeParams.from_vector(vector, orders, check=False), u).y
 
     # compiled: eager `lax.scan`s under `jacfwd` compile a program per primitive call
-    want = jax.jit(jax.jacfwd(output))(params.to_vector())
-    y, J = jax.jit(output_jacobian)(params, u)
+    want = jit(jax.jacfwd(output))(params.to_vector())
+    y, J = jit(output_jacobian)(params, u)
     assert J.shape == (300, orders.size)
     # exact up to rounding: the same switching decisions, the same arithmetic up to order
-    np.testing.assert_allclose(y, jax.jit(output)(params.to_vector()), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(y, jit(output)(params.to_vector()), rtol=0, atol=1e-12)
     np.testing.assert_allclose(J, want, rtol=0, atol=1e-8)
     assert float(jnp.max(jnp.abs(want))) > 0.5  # a Jacobian worth comparing

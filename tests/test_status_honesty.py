@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from jaxcascade._cli import main
+from jaxcascade._compile import jit
 from jaxcascade._estimator import estimator
 from jaxcascade._estimator._recursive import NOISE_FREE, Recursive, recursive
 from jaxcascade._status import Status, status_names
@@ -154,7 +155,7 @@ def test_validity_statistic_matches_numpy_and_ignores_the_noise_colour():
     np.testing.assert_allclose(
         float(validity_statistic(e, u)), _numpy_validity(np.asarray(e), np.asarray(u)), rtol=1e-9
     )
-    statistic = jax.jit(validity_statistic)  # one program, not one per eager call
+    statistic = jit(validity_statistic)  # one program, not one per eager call
     # noise independent of a white input passes, white or AR(1) with pole 0.9 once
     # whitened (each test about standard normal: bound 5 is P ~ 4e-4 per test)
     for k in jax.random.split(key_e, 6):
@@ -192,7 +193,7 @@ def test_claim_refuses_what_the_model_cannot_describe_and_keeps_the_truth(noise)
     names = list(ex.orders.names)
 
     # one compiled program per `project` (eagerly, each call compiles every scan anew)
-    @functools.partial(jax.jit, static_argnames="project")
+    @functools.partial(jit, static_argnames="project")
     def judged(vector, start, record, project):
         params = CascadeParams.from_vector(vector, ex.orders, check=False)
         simulated, jacobian = output_jacobian(params, u)
