@@ -27,6 +27,30 @@ def test_jit_passes_them_at_the_top_and_not_when_nested():
     assert float(f(x, power=2)) == 14.0
     assert float(jax.jit(lambda x: f(x, power=2) + 1.0)(x)) == 15.0
     assert jax.vmap(lambda x: f(x, power=1))(jnp.ones((3, 2))).tolist() == [2.0, 2.0, 2.0]
+    assert float(jax.grad(lambda x: f(x, power=2))(x)[3]) == 6.0
+    assert float(jax.lax.scan(lambda c, v: (c + f(v, power=1), None), 0.0, x[:, None])[0]) == 6.0
+
+
+def test_an_eager_vmap_compiles_its_own_program_with_the_options():
+    # `_own_program`: arrays, or an eager vmap's tracers (JAX compiles the batched
+    # program on its own, with the options); not inside jit, grad or scan
+    from jaxcascade._compile import _own_program
+
+    seen = []
+
+    def probe(x):
+        seen.append(_own_program(x))
+        return x
+
+    x = jnp.ones((3, 2))
+    probe(x)
+    jax.vmap(probe)(x)
+    jax.vmap(jax.vmap(probe))(x)
+    jax.jit(probe)(x)
+    jax.jit(jax.vmap(probe))(x)
+    jax.grad(lambda v: jnp.sum(probe(v)))(x)
+    jax.lax.scan(lambda c, v: (c, probe(v)), 0.0, x)
+    assert seen == [True, True, True, False, False, False, False]
 
 
 def test_the_same_estimates_with_xlas_defaults():
