@@ -69,8 +69,7 @@ def jit(function=None, **kwargs):
     `vmap` (which compiles the batched program as its own, `_own_program`). Inside
     another `jit`, a `scan` or a `grad` it is a plain `jax.jit`, inlined into the
     caller's program, which is compiled with the caller's options (JAX refuses options
-    on a nested `jit`). The options are looked up at the
-    first call, not at import."""
+    on a nested `jit`). The options are looked up at the first call, not at import."""
     if function is None:
         return functools.partial(jit, **kwargs)
 
