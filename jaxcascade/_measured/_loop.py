@@ -997,22 +997,19 @@ def _candidate_work(name, action, saved, context):
     model, current, failed, round_, us, ys, records, assess = fit_against
     began = time.monotonic()
     if action == "noise":
-        noise_model, p_value = (
-            _fit_noise(model, us, ys, records)
-            if saved is None
-            else (model_from_dict(saved["model"]), saved["p_value"])
-        )
-    elif saved is None:
+        if saved is None:
+            noise_model, p_value = _fit_noise(model, us, ys, records)
+        else:
+            noise_model, p_value = model_from_dict(saved["model"]), saved["p_value"]
+        seconds = time.monotonic() - began if saved is None else None
+        options = {**judged_by, "noise_alpha": noise_alpha}
+        c = _score_noise(noise_model, p_value, current, failed, round_, assess, **options)
+        return c, seconds, p_value
+    if saved is None:
         fit = _fit_candidate(name, model, us, ys, records, action)
     else:
         fit = None if saved["model"] is None else (model_from_dict(saved["model"]), saved["label"])
     seconds = time.monotonic() - began if saved is None else None
-    if action == "noise":
-        c = _score_noise(
-            noise_model, p_value, current, failed, round_, assess, **judged_by,
-            noise_alpha=noise_alpha,
-        )  # fmt: skip
-        return c, seconds, p_value
     if fit is None:
         return None, seconds, None
     c = _score_candidate(name, fit[1], fit[0], *fit_against, **judged_by, action=action)
