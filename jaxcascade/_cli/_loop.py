@@ -2,9 +2,10 @@
 
 The report (`--report DIR`) holds `report.json` (what `--json` prints, plus the
 models and the ARX peer), `report.md`, `candidates.csv`, the measured versus simulated
-validation output before and after (`compare.png`), and the residual tests before and
-after (`residual_before_*.png`, `residual_after_*.png`), and the final model as a model
-file (`model.json`, `_model_file`: `jaxcascade simulate` applies it to new records).
+validation output before and after (`compare.png`), every residual test before and
+after in one figure each (`residual_before_overview.png`, `residual_after_overview.png`),
+and the final model as a model file (`model.json`, `_model_file`: `jaxcascade simulate`
+applies it to new records).
 Each record's figure is `records/<k>-<role>.png`. `--no-figures` writes the same report
 without the PNG files (on short records drawing them takes much of the loop's time).
 While the loop runs, every finished fit and round is kept in `DIR/checkpoints/`
@@ -389,7 +390,7 @@ def _run_loop(args, checkpoints) -> int:
     )
     from .._measured._scoring import score_record, verdict
     from .._plot._loop import plot_compare
-    from .._plot._residuals import save_residual_figures
+    from .._plot._residuals import plot_residual_tests
 
     orders = parse_orders(args.orders, "loop")
     if args.max_effects < 0:
@@ -659,9 +660,16 @@ def _run_loop(args, checkpoints) -> int:
             init=(time[init_from], time[scored_from]) if scored_from > init_from else None,
             scored=(time[scored_from], time[(window[1] if window else len(time)) - 1]),
         )
-        save_residual_figures(result.before.tests, folder, prefix="residual_before_")
+        # every residual test in one figure per model (`plot_residual_tests`); a figure
+        # per test as well (`save_residual_figures`) repeated its panels and more than
+        # doubled the time spent drawing them
+        plot_residual_tests(result.before.tests).savefig(
+            folder / "residual_before_overview.png", dpi=120
+        )
         if result.added:
-            save_residual_figures(result.after.tests, folder, prefix="residual_after_")
+            plot_residual_tests(result.after.tests).savefig(
+                folder / "residual_after_overview.png", dpi=120
+            )
     if args.json:
         print(strict_json({key: full[key] for key in keys}))
     else:
