@@ -42,6 +42,8 @@ bench_robust() {  # issue 16: robust on example1, example2 and the random family
 }
 speed() {  # issue 33: where a loop's and a fit's time goes, cold and warm cache, per stage
     python benchmarks/loop_speed.py --out results/loop_speed
+    # a program per candidate structure against one program holding every effect
+    python benchmarks/effect_programs.py --out results/effect_programs
 }
 speed_damper() {  # issue 33: the same for one damper run (loop_speed.brfd_argv), cold and warm
     python benchmarks/loop_speed.py --brfd "${BRFD_DATA:-../shared/data/brfd}" --cases brfd \
