@@ -34,22 +34,12 @@ import subprocess
 import sys
 import time
 
+from jaxcascade._measured._effects import STRUCTURAL
+from jaxcascade._names import EFFECTS as LIBRARY_NAMES
+
 # the effects that keep the cascade's orders (`dynamics_order` and `pwl_segment` change
 # them; `colored_noise` is the noise model, not an effect)
-EFFECTS = (
-    "output_offset",
-    "input_delay",
-    "output_saturation",
-    "output_drift",
-    "output_feedthrough",
-    "slack_friction",
-    "backlash_friction",
-    "backlash_friction_contacts",
-    "prandtl_ishlinskii",
-    "dahl_friction",
-    "input_backlash",
-    "general_backlash",
-)
+EFFECTS = tuple(name for name in LIBRARY_NAMES if name not in STRUCTURAL)
 EVENTS = {
     "/jax/core/compile/jaxpr_trace_duration": "jaxpr_trace_s",
     "/jax/core/compile/jaxpr_to_mlir_module_duration": "lowering_s",
