@@ -121,16 +121,6 @@ def run_case(case: str, n: int) -> list[dict]:
     return json.loads(done.stdout.strip().splitlines()[-1])["rows"]
 
 
-def markdown(frame) -> str:
-    columns = [str(c) for c in frame.columns]
-    lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
-    for row in frame.itertuples(index=False):
-        lines.append(
-            "| " + " | ".join("-" if str(v) in ("nan", "None") else str(v) for v in row) + " |"
-        )
-    return "\n".join(lines)
-
-
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--n", type=int, default=1024)
@@ -143,7 +133,7 @@ def main(argv=None) -> int:
     import pandas as pd
 
     sys.path.insert(0, str(pathlib.Path(__file__).parent))
-    from loop_speed import machine
+    from loop_speed import machine, markdown
 
     import jaxcascade
 
@@ -157,6 +147,7 @@ def main(argv=None) -> int:
         print(f"{case}: done", file=sys.stderr)
     frame = pd.DataFrame(rows)
     frame["compile_s"] = (frame.jaxpr_trace_s + frame.lowering_s + frame.xla_s).round(3)
+    frame["run_s"] = frame.run_s.astype("Float64")  # none for the refit: "-" in the table
     out = pathlib.Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     frame.to_csv(out.with_suffix(".csv"), index=False)

@@ -663,13 +663,10 @@ def _run_loop(args, checkpoints) -> int:
         # every residual test in one figure per model (`plot_residual_tests`); a figure
         # per test as well (`save_residual_figures`) repeated its panels and more than
         # doubled the time spent drawing them
-        plot_residual_tests(result.before.tests).savefig(
-            folder / "residual_before_overview.png", dpi=120
-        )
-        if result.added:
-            plot_residual_tests(result.after.tests).savefig(
-                folder / "residual_after_overview.png", dpi=120
-            )
+        models = [("before", result.before)] + ([("after", result.after)] if result.added else [])
+        for when, evaluated in models:
+            path = folder / f"residual_{when}_overview.png"
+            plot_residual_tests(evaluated.tests).savefig(path, dpi=120)
     if args.json:
         print(strict_json({key: full[key] for key in keys}))
     else:
