@@ -67,14 +67,10 @@ from ._effects import (
     OutputOffset,
     Start,
     backlash_of,
-    choose,
-    library_groups,
     plain,
     simulate_padded,
     simulate_with_switches,
-    unchoose,
 )
-from ._effects._choice import choice
 from ._initial_state import initialise
 from ._loop_checkpoint import (
     Checkpoints,
@@ -98,12 +94,7 @@ from ._significance import (
 # the loop simulates the same models on the same records many times, and a record of a
 # new length would otherwise compile a new program).
 _parallel_jit = filter_jit(lambda effect, u: effect.parallel(u))
-
-
-def _simulate(model: ExtendedModel, u):
-    """`simulate_padded` (one record on the host, padded to its bucket) by the program of
-    `model`'s effects' groups (`_effects._choice`), shared by every member."""
-    return simulate_padded(choose(model, library_groups()), u)
+_simulate = simulate_padded  # one record on the host, padded to its bucket (`_effects`)
 
 
 def simulated_output(model: ExtendedModel, u) -> np.ndarray:
@@ -224,10 +215,7 @@ def _refit(
         z, cost, status, _ = least_squares(residual, z0, None, max_steps=max_steps)
         return unpack(z), cost, status
 
-    # every parameter of `new` has the starts' leading axis; a scalar (a `Choice`'s
-    # index) is shared by them, so that only its member's branch runs
-    axes = jax.tree_util.tree_map(lambda leaf: 0 if jnp.ndim(leaf) else None, new)
-    return eqx.filter_vmap(one, in_axes=(0, axes))(vectors, new)
+    return eqx.filter_vmap(one)(vectors, new)
 
 
 def refit_all(model: ExtendedModel, start: Start, u, y, max_steps: int = 150):
@@ -241,18 +229,9 @@ def refit_all(model: ExtendedModel, start: Start, u, y, max_steps: int = 150):
     dtype = groups[0][0].dtype
     effect = jax.tree_util.tree_map(lambda leaf: jnp.asarray(leaf, dtype), start.effect)
     bounds = jnp.asarray(breakpoint_bounds(us), dtype)
-    # one program for every member of the effects' groups (`_effects._choice`)
-    of = library_groups()
     models, costs, status = _refit(
-        jnp.asarray(start.vectors, dtype),
-        choice(effect, of),
-        choose(model, of),
-        groups,
-        start.orders,
-        max_steps,
-        bounds,
+        jnp.asarray(start.vectors, dtype), effect, model, groups, start.orders, max_steps, bounds
     )
-    models = unchoose(models)
     costs = np.asarray(costs)
     costs = np.where(np.isfinite(costs), costs, np.inf)
     return models, costs, np.asarray(status), np.argsort(costs, kind="stable")

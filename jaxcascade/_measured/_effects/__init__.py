@@ -4,8 +4,6 @@ the curved output backlash).
 
 To add an effect: its class in a module here, and its entry in `EFFECTS`."""
 
-import functools
-
 from ._base import (
     DynamicsOrder as DynamicsOrder,
 )
@@ -50,21 +48,6 @@ from ._base import (
 )
 from ._base import (
     simulate_with_switches as simulate_with_switches,
-)
-from ._choice import (
-    Choice as Choice,
-)
-from ._choice import (
-    choose as choose,
-)
-from ._choice import (
-    groups as groups,
-)
-from ._choice import (
-    unchoose as unchoose,
-)
-from ._choice import (
-    unchoose_states as unchoose_states,
 )
 from ._curved import (
     CurvedBacklash as CurvedBacklash,
@@ -114,9 +97,3 @@ HYSTERESIS = tuple(name for name, effect in EFFECTS.items() if effect.needs_sign
 STRUCTURAL = ("dynamics_order", "pwl_segment")
 # the hysteresis paths that may also replace the cascade (a path of the input alone)
 REPLACEMENTS = tuple(name for name in HYSTERESIS if EFFECTS[name].linear)
-
-
-@functools.cache
-def library_groups() -> tuple:
-    """The library's groups of effects that share one program (`_choice.groups`)."""
-    return groups(EFFECTS.values())
