@@ -118,11 +118,58 @@ def filter_jit(function):
             return eqx.filter_jit(function, compiler_options=options)
         return eqx.filter_jit(function)
 
+    first = _FirstCalls()
+
     @functools.wraps(function)
     def call(*args, **kw):
-        return compiled(_own_program((args, kw)))(*args, **kw)
+        top = _own_program((args, kw))
+        if not top:
+            return compiled(top)(*args, **kw)
+        return first.run(_signature((args, kw)), compiled(top), *args, **kw)
 
     return call
+
+
+def _signature(arguments):
+    """What a `jit` keys its programs on: the arguments' static parts, their tree and
+    the arrays' shapes and dtypes; None where a static part cannot be hashed."""
+    dynamic, static = eqx.partition(arguments, eqx.is_array)
+    leaves, tree = jax.tree_util.tree_flatten(dynamic)
+    shapes = tuple(
+        (tuple(leaf.shape), str(leaf.dtype), bool(getattr(leaf, "weak_type", False)))
+        for leaf in leaves
+    )
+    parts, layout = jax.tree_util.tree_flatten(static)
+    key = (tree, layout, tuple(parts), shapes)
+    try:
+        hash(key)
+    except TypeError:
+        return None
+    return key
+
+
+class _FirstCalls:
+    """The first call of each signature runs alone: threads that call a program with
+    the same signature meanwhile (the loop's candidates, `_loop._Workers`, several of
+    one group of effects: `_effects._choice`) wait for it, then find it compiled,
+    instead of tracing and compiling it again each. Later calls take no lock."""
+
+    def __init__(self):
+        self.done: set = set()
+        self.locks: dict = {}
+        self.guard = threading.Lock()
+
+    def run(self, key, function, *args, **kw):
+        if key is None or key in self.done:
+            return function(*args, **kw)
+        with self.guard:
+            lock = self.locks.setdefault(key, threading.Lock())
+        with lock:
+            out = function(*args, **kw)
+            self.done.add(key)
+        with self.guard:
+            self.locks.pop(key, None)
+        return out
 
 
 # -- Bounded compilation -------------------------------------------------------------
@@ -334,6 +381,8 @@ def exported(function=None, *, custom_calls: tuple[str, ...] = (), prepare=None)
     name = f"{function.__module__}.{function.__qualname__}"
     loaded: dict = {}  # key -> the kept program, arrays in, the function's output out
     refused: set = set()  # keys whose export or pickling failed in this process
+    locks: dict = {}  # key -> the lock its first loader holds
+    guard = threading.Lock()
     targets = (*_LAPACK, *custom_calls)
     checks = tuple(jax.export.DisabledSafetyCheck.custom_call(t) for t in targets)
 
@@ -354,13 +403,23 @@ def exported(function=None, *, custom_calls: tuple[str, ...] = (), prepare=None)
             return jitted(*args, **kwargs)
         entry = loaded.get(key)
         if entry is None:
-            if prepare is not None:
-                prepare()
-            entry = _load(where, key) or _export(function, static, tree, leaves, where, key, checks)
+            # one thread loads or exports a key; others with it wait (`_FirstCalls`)
+            with guard:
+                lock = locks.setdefault(key, threading.Lock())
+            with lock:
+                entry = loaded.get(key)
+                if entry is None and key not in refused:
+                    if prepare is not None:
+                        prepare()
+                    entry = _load(where, key) or _export(
+                        function, static, tree, leaves, where, key, checks
+                    )
+                    if entry is None:
+                        refused.add(key)
+                    else:
+                        loaded[key] = entry
             if entry is None:
-                refused.add(key)
                 return jitted(*args, **kwargs)
-            loaded[key] = entry
         return entry(*leaves)
 
     call.jitted = jitted

@@ -37,7 +37,8 @@ score covers `[start, stop)`.
 
 Compilation is bounded: one program per model structure, record-length bucket
 (`_compile.bucket_length`: the length rounded up to 3 significant bits, the input
-padded with its last value) and `n`; the start is a traced index.
+padded with its last value) and `n`; the start is a traced index, and an effect enters
+as its group's `Choice` (`_effects._choice`: one program for every member).
 """
 
 from __future__ import annotations
@@ -57,6 +58,7 @@ from .._metrics import score
 from .._system._general_backlash import general_backlash
 from .._system._model import CascadeParams
 from .._system._simulate import _poles_blocked, _poles_scan, backlash_switches, pwl
+from ._effects import choose, unchoose_states
 from ._effects._base import EffectState, ExtendedModel, backlash_of, recent
 
 # Start positions of each operator in an initial-state fit: fractions of its
@@ -330,8 +332,10 @@ def initialise(
     first = start - n
     u_padded = jnp.asarray(pad(np.asarray(u)))
     y_padded = jnp.asarray(pad(np.asarray(y)))
+    # one program for every member of an effect's group in force (`_effects._choice`)
+    chosen = choose(model)
     fit = _initialise(
-        model,
+        chosen,
         u_padded,
         y_padded,
         jnp.asarray(first, jnp.int32),
@@ -340,8 +344,10 @@ def initialise(
         max_steps=int(max_steps),
     )
     host = {k: np.asarray(getattr(fit, k))[:T] for k in ("y", "y_from_rest", "innovations")}
+    state = fit.state
+    state = ModelState(state.cascade, unchoose_states(model, chosen, state.effects), state.noise)
     return Initialised(
-        state=fit.state,
+        state=state,
         first=first,
         start=start,
         y=host["y"],

@@ -36,7 +36,9 @@
 
 from __future__ import annotations
 
+import contextvars
 import dataclasses
+import functools
 import os
 import time
 
@@ -67,10 +69,14 @@ from ._effects import (
     OutputOffset,
     Start,
     backlash_of,
+    choose,
+    grouping,
     plain,
     simulate_padded,
     simulate_with_switches,
+    unchoose,
 )
+from ._effects._choice import choice
 from ._initial_state import initialise
 from ._loop_checkpoint import (
     Checkpoints,
@@ -94,7 +100,12 @@ from ._significance import (
 # the loop simulates the same models on the same records many times, and a record of a
 # new length would otherwise compile a new program).
 _parallel_jit = filter_jit(lambda effect, u: effect.parallel(u))
-_simulate = simulate_padded  # one record on the host, padded to its bucket (`_effects`)
+
+
+def _simulate(model: ExtendedModel, u):
+    """`simulate_padded` (one record on the host, padded to its bucket) by the program of
+    `model`'s effects' groups (`_effects._choice`), shared by every member."""
+    return simulate_padded(choose(model), u)
 
 
 def simulated_output(model: ExtendedModel, u) -> np.ndarray:
@@ -215,7 +226,10 @@ def _refit(
         z, cost, status, _ = least_squares(residual, z0, None, max_steps=max_steps)
         return unpack(z), cost, status
 
-    return eqx.filter_vmap(one)(vectors, new)
+    # every parameter of `new` has the starts' leading axis; a scalar (a `Choice`'s
+    # index) is shared by them, so that only its member's branch runs
+    axes = jax.tree_util.tree_map(lambda leaf: 0 if jnp.ndim(leaf) else None, new)
+    return eqx.filter_vmap(one, in_axes=(0, axes))(vectors, new)
 
 
 def refit_all(model: ExtendedModel, start: Start, u, y, max_steps: int = 150):
@@ -229,9 +243,17 @@ def refit_all(model: ExtendedModel, start: Start, u, y, max_steps: int = 150):
     dtype = groups[0][0].dtype
     effect = jax.tree_util.tree_map(lambda leaf: jnp.asarray(leaf, dtype), start.effect)
     bounds = jnp.asarray(breakpoint_bounds(us), dtype)
+    # one program for every member of the effects' groups in force (`_effects._choice`)
     models, costs, status = _refit(
-        jnp.asarray(start.vectors, dtype), effect, model, groups, start.orders, max_steps, bounds
+        jnp.asarray(start.vectors, dtype),
+        choice(effect),
+        model,
+        groups,
+        start.orders,
+        max_steps,
+        bounds,
     )
+    models = unchoose(models)
     costs = np.asarray(costs)
     costs = np.where(np.isfinite(costs), costs, np.inf)
     return models, costs, np.asarray(status), np.argsort(costs, kind="stable")
@@ -597,6 +619,20 @@ class LoopResult:
         }
 
 
+def _grouped(loop):
+    """`loop` with the groups of the effects it may try in force (`_effects._choice`):
+    members of one group are fitted and scored by one program."""
+
+    @functools.wraps(loop)
+    def run(*args, effects: tuple[str, ...] | None = None, **kwargs):
+        names = tuple(effects or EFFECTS)
+        with grouping([EFFECTS[name] for name in names if name in EFFECTS]):
+            return loop(*args, effects=effects, **kwargs)
+
+    return run
+
+
+@_grouped
 def model_error_loop(
     u_est,
     y_est,
@@ -1051,7 +1087,8 @@ class _Workers:
     def submit(self, function, *args):
         if self.pool is None:
             return _Deferred(function, args)
-        return self.pool.submit(function, *args)
+        # in the caller's context: the groups in force (`_effects._choice.grouping`)
+        return self.pool.submit(contextvars.copy_context().run, function, *args)
 
     def __enter__(self):
         return self

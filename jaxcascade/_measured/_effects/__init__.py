@@ -49,6 +49,24 @@ from ._base import (
 from ._base import (
     simulate_with_switches as simulate_with_switches,
 )
+from ._choice import (
+    Choice as Choice,
+)
+from ._choice import (
+    choose as choose,
+)
+from ._choice import (
+    grouping as grouping,
+)
+from ._choice import (
+    groups as groups,
+)
+from ._choice import (
+    unchoose as unchoose,
+)
+from ._choice import (
+    unchoose_states as unchoose_states,
+)
 from ._curved import (
     CurvedBacklash as CurvedBacklash,
 )
