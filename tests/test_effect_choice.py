@@ -113,6 +113,8 @@ def test_one_initial_state_program_for_a_group_and_the_members_own_result():
         before = compile_count()
         with grouping(EFFECTS.values()):
             fits[name] = (_initial_state.initialise(model, u, y, 150, 40), compile_count() - before)
+        if name not in ("output_offset", "dahl_friction"):  # one member's own program each
+            continue
         own = _initial_state._initialise.jitted(
             model,
             jnp.asarray(pad(u)),
