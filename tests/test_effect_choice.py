@@ -54,6 +54,13 @@ def test_groups_of_the_library():
     assert not eligible(EFFECTS["general_backlash"])  # and a backlash of its own
     # groups among the effects a loop tries: a member alone is no group
     assert groups([EFFECTS["output_offset"], EFFECTS["slack_friction"]]) == ()
+    # in a loop, a library group used whole where two of its members are tried
+    model = MODELS["output_offset"]()
+    tried = [EFFECTS["output_offset"], EFFECTS["output_drift"], EFFECTS["slack_friction"]]
+    with grouping(tried, EFFECTS.values()):
+        assert choose(model).effects[-1].kinds == LIBRARY[0]
+    with grouping(tried[::2], EFFECTS.values()):
+        assert not isinstance(choose(model).effects[-1], Choice)
 
 
 @pytest.mark.parametrize("name", GROUPED)

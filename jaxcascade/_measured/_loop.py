@@ -626,7 +626,7 @@ def _grouped(loop):
     @functools.wraps(loop)
     def run(*args, effects: tuple[str, ...] | None = None, **kwargs):
         names = tuple(effects or EFFECTS)
-        with grouping([EFFECTS[name] for name in names if name in EFFECTS]):
+        with grouping([EFFECTS[name] for name in names if name in EFFECTS], EFFECTS.values()):
             return loop(*args, effects=effects, **kwargs)
 
     return run

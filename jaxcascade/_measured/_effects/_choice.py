@@ -24,14 +24,15 @@ initial-state fit then starts from a grid over it, so a mixed group would give e
 member the grid's starts) and by the size of that state, in powers of two (a member with
 a small state does not pay for the largest one's Jacobian columns): the output and input
 effects in one group, the operator paths with a state of one or two in another, the
-backlash friction (nine) alone. They are formed among the effects a loop may try
-(`grouping`), and a member alone is left as it is. Only a model's last effect is
-chosen (`choose`): the candidates differ in the effect they add, and a `Choice` further
-up (the offset of a candidate that replaces the cascade, an effect of an earlier round)
-would make every program of that structure larger without sharing it. Both rules were
-measured on the damper run (`benchmarks/loop_compare.py --damper` against the commit
-before): every effect of a model chosen, with library-wide groups, ran 1.14-1.19x
-slower and moved a candidate's validation NRMSE by 0.178.
+backlash friction (nine) alone. A group is used where a loop may try two or more of its
+members (`grouping`), whole whichever they are; a member alone is left as it is. Only a
+model's last effect is chosen (`choose`): the candidates differ in the effect they add,
+and a `Choice` further up (the offset of a candidate that replaces the cascade, an effect
+of an earlier round) would make every program of that structure larger without sharing
+it. Both rules were measured on the damper run (`benchmarks/loop_compare.py --damper`
+against the commit before): every effect of a model chosen, with every group used
+whatever the loop tries, ran 1.14-1.19x slower and moved a candidate's validation NRMSE
+by 0.178.
 """
 
 from __future__ import annotations
@@ -104,12 +105,15 @@ _ACTIVE: contextvars.ContextVar = contextvars.ContextVar("jaxcascade_groups", de
 
 
 @contextlib.contextmanager
-def grouping(kinds):
-    """Within the block, `choose` and `choice` use the groups of `kinds` (`groups`: the
-    effects a loop may try; a member alone in its group is left as it is). A thread
-    pool's tasks see it where they run in a copy of the context
-    (`contextvars.copy_context`)."""
-    token = _ACTIVE.set(groups(kinds))
+def grouping(kinds, library=None):
+    """Within the block, `choose` and `choice` use the groups of `library` (`groups`;
+    default `kinds`) that hold two or more of `kinds` (the effects a loop may try: a
+    member alone is left as it is). A group keeps all its members whichever of them are
+    tried, so that loops that try different effects share its programs. A thread pool's
+    tasks see it where they run in a copy of the context (`contextvars.copy_context`)."""
+    kinds = list(kinds)
+    found = groups(kinds if library is None else library)
+    token = _ACTIVE.set(tuple(g for g in found if sum(k in kinds for k in g) > 1))
     try:
         yield
     finally:
