@@ -148,6 +148,19 @@ def _signature(arguments):
     return key
 
 
+class _PerKey:
+    """A lock per key, made on first use: threads working on one key (tracing,
+    compiling or loading one program) take turns; threads on other keys do not wait."""
+
+    def __init__(self):
+        self.locks: dict = {}
+        self.guard = threading.Lock()
+
+    def __call__(self, key) -> threading.Lock:
+        with self.guard:
+            return self.locks.setdefault(key, threading.Lock())
+
+
 class _FirstCalls:
     """The first call of each signature runs alone: threads that call a program with
     the same signature meanwhile (the loop's candidates, `_loop._Workers`, several of
@@ -156,19 +169,14 @@ class _FirstCalls:
 
     def __init__(self):
         self.done: set = set()
-        self.locks: dict = {}
-        self.guard = threading.Lock()
+        self.lock = _PerKey()
 
     def run(self, key, function, *args, **kw):
         if key is None or key in self.done:
             return function(*args, **kw)
-        with self.guard:
-            lock = self.locks.setdefault(key, threading.Lock())
-        with lock:
+        with self.lock(key):
             out = function(*args, **kw)
             self.done.add(key)
-        with self.guard:
-            self.locks.pop(key, None)
         return out
 
 
@@ -381,8 +389,7 @@ def exported(function=None, *, custom_calls: tuple[str, ...] = (), prepare=None)
     name = f"{function.__module__}.{function.__qualname__}"
     loaded: dict = {}  # key -> the kept program, arrays in, the function's output out
     refused: set = set()  # keys whose export or pickling failed in this process
-    locks: dict = {}  # key -> the lock its first loader holds
-    guard = threading.Lock()
+    lock = _PerKey()  # one thread loads or exports a key; others with it wait
     targets = (*_LAPACK, *custom_calls)
     checks = tuple(jax.export.DisabledSafetyCheck.custom_call(t) for t in targets)
 
@@ -403,10 +410,7 @@ def exported(function=None, *, custom_calls: tuple[str, ...] = (), prepare=None)
             return jitted(*args, **kwargs)
         entry = loaded.get(key)
         if entry is None:
-            # one thread loads or exports a key; others with it wait (`_FirstCalls`)
-            with guard:
-                lock = locks.setdefault(key, threading.Lock())
-            with lock:
+            with lock(key):
                 entry = loaded.get(key)
                 if entry is None and key not in refused:
                     if prepare is not None:

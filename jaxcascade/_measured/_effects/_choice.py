@@ -271,9 +271,8 @@ def _group(kind, of) -> tuple[type[Effect], ...] | None:
 def choice(effect: Effect, of=None) -> Effect:
     """`effect` (batched or not: a leading axis on every parameter) as a `Choice` of its
     group among `of` (`groups`; default those in force, `grouping`), or `effect` itself
-    where it has none. The index is a
-    scalar even for a batched effect: the starts share it. Built on the host (NumPy):
-    eager `jnp` calls would each compile a program."""
+    where it has none. The index is a scalar even for a batched effect: the starts share
+    it. Built on the host (NumPy): eager `jnp` calls would each compile a program."""
     kinds = _group(type(effect), _ACTIVE.get() if of is None else of)
     if kinds is None:
         return effect
@@ -298,12 +297,9 @@ def unchoice(effect: Effect) -> Effect:
     `effect` itself; on the host, as `choice`."""
     if not isinstance(effect, Choice):
         return effect
-    kind = effect.kinds[int(np.ravel(np.asarray(effect.index))[0])]
-    free, held = _fields(kind)
-    values, kept = np.asarray(effect.values), np.asarray(effect.held)
-    fields = {name: values[..., i] for i, name in enumerate(free)}
-    fields.update({name: kept[..., i] for i, name in enumerate(held)})
-    return kind(**{name: jax.device_put(np.ascontiguousarray(v)) for name, v in fields.items()})
+    host = jax.tree_util.tree_map(np.asarray, effect)
+    member = host._member(int(np.ravel(host.index)[0]))
+    return jax.tree_util.tree_map(lambda a: jax.device_put(np.ascontiguousarray(a)), member)
 
 
 def choose(model: ExtendedModel, of=None) -> ExtendedModel:
