@@ -158,7 +158,7 @@ def write_summary(
     why = {**WHY, "EMPS": emps_why(out)} if why is None else why
     import pandas as pd
 
-    rows, notes = [], []
+    rows, notes, covers = [], [], {}
     for folder in sorted(p for p in out.iterdir() if p.is_dir()):
         resources_path = folder / "resources.json"
         if not resources_path.exists():
@@ -173,6 +173,7 @@ def write_summary(
             continue
         report = json.loads(report_path.read_text())
         bench = report["benchmark"]
+        covers[bench["name"]] = report.get("coverage", {}).get("sentences", [])
         for test in bench["tests"]:
             rows.append(
                 {
@@ -237,6 +238,11 @@ def write_summary(
                 f"the ARX peer's {r['arx_rmse']:.4g} and the best published linear "
                 f"{'-' if best is None else f'{best:.4g}'}: {why.get(r['benchmark'], '')}."
             )
+        # what the run's report says of its records' input coverage (`_measured._coverage`)
+        for name in dict.fromkeys(r["benchmark"] for r in misses):
+            if covers.get(name):
+                lines += ["", f"The input coverage of {name}'s run (its report):", ""]
+                lines += [f"- {sentence}" for sentence in covers[name]]
     if notes:
         lines += ["", "Runs that did not finish:", "", *notes]
     (out / "README.md").write_text("\n".join(lines) + "\n")

@@ -46,12 +46,14 @@ from nonlinear_benchmarks import run_benchmark, write_summary  # noqa: E402
 
 NAMES = ("Cascaded_Tanks", "WienerHammerBenchMark")
 # Said where a stand-in's final model misses the ARX peer: what is known of why. The
-# Cascaded_Tanks miss is a finding, not a limit of the class: the cascade contains the
-# linear model, yet its own fit already scores worse than the ARX peer.
+# Cascaded_Tanks miss is not a limit of the class (the cascade contains the linear
+# model); what is measured of its cause is the run's input coverage, which
+# `write_summary` lists below the misses from the run's report.
 WHY = {
-    "Cascaded_Tanks": "not explained yet: the declared cascade (which contains the linear "
-    "model) already scores worse than the ARX peer on the validation and the test record "
-    "(the report's table), and the effects the loop adds to it do not recover that",
+    "Cascaded_Tanks": "not a limit of the class (the cascade contains the linear model): "
+    "the declared cascade's own fit already scores worse than the ARX peer on the "
+    "validation and the test record, and the effects the loop adds do not recover that; "
+    "the run's input coverage below says where its records leave the fit undetermined",
     "WienerHammerBenchMark": "the static curve sits between two linear blocks, and the "
     "cascade has no linear block before its static one",
 }

@@ -221,6 +221,16 @@ def test_loop_on_several_records_with_a_window(capsys, tmp_path):
     assert at_the_floor(test["error_from_rest"], paths[3])
     # a correct cascade beats the mean and the ARX peer: nothing to warn about
     assert result["verdict"] == []
+    # records of one input distribution cover each other's range: no coverage sentence,
+    # a row per record in its role (the estimation records first)
+    cover = result["coverage"]
+    assert cover["sentences"] == []
+    roles = [(r["record"], r["role"]) for r in cover["records"]]
+    assert roles == [("r1.csv", "estimation"), ("r2.csv", "estimation")] + [
+        ("r3.csv", "validation"),
+        ("r4.csv", "test"),
+    ]
+    assert all(r["span"] > 0.9 and r["outside"] <= 0.01 for r in cover["records"])
     assert result["structure_after"] == "u -> pwl(2,2) -> linear(2,2) -> backlash -> y"
     full = json.loads((tmp_path / "report" / "report.json").read_text())
     assert len(full["records"]["estimation"]) == 2
@@ -231,6 +241,7 @@ def test_loop_on_several_records_with_a_window(capsys, tmp_path):
     assert set(errors) == set(jc.Orders().names) and all(e > 0 for e in errors.values())
     report = (tmp_path / "report" / "report.md").read_text()
     assert "better than the mean of the output" in report and "r4.csv | test" in report
+    assert "Input coverage" in report and "| r3.csv | validation | 600 |" in report
     # A test window per test record, or a clear error.
     bad = argv + ["--test-window", "1:2", "3:4"]
     assert main(bad) == 2

@@ -73,6 +73,7 @@ def _markdown(report: dict, command: str) -> str:
         "The validation record chose among the candidates: only a test record's figure is "
         "out of sample.",
         "",
+        *_coverage_lines(report.get("coverage")),
         f"Command: `{command}`",
         "",
         f"- structure before: `{report['structure_before']}`",
@@ -163,6 +164,35 @@ def _markdown(report: dict, command: str) -> str:
             lines.append(f"| {name} | {_p(test)} | {_p(after.get(name))} |")
     lines.append(f"| all tests pass | {before['ok']} | {after['ok']} |")
     return "\n".join(lines) + "\n"
+
+
+def _coverage_lines(cover: dict | None) -> list[str]:
+    """The report's input coverage (`_measured._coverage`): its sentences, then one row
+    per record."""
+    if not cover:
+        return []
+    lines = [
+        "Input coverage, in the records' units (`outside`: the share of a record's "
+        "samples whose input lies outside the estimation records' range; `span`: the "
+        "share of that range its input covers). A sentence below flags a validation or "
+        f"test record outside it on more than {100 * cover['outside_limit']:g} % of its "
+        f"samples, and a validation record spanning less than "
+        f"{100 * cover['span_limit']:g} % of it.",
+        "",
+    ]
+    lines += [f"- {sentence}" for sentence in cover["sentences"]]
+    lines += [""] if cover["sentences"] else []
+    lines += [
+        "| record | role | samples | input from | input to | output std | outside | span |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for r in cover["records"]:
+        lines.append(
+            f"| {r['record']} | {r['role']} | {r['samples']} | {r['u_min']:.4g} | "
+            f"{r['u_max']:.4g} | {r['y_std']:.4g} | {100 * r['outside']:.1f} % | "
+            f"{100 * r['span']:.0f} % |"
+        )
+    return lines + [""]
 
 
 def _final_model(model, errors: dict, scaling) -> dict:
@@ -381,6 +411,7 @@ def _run_loop(args, checkpoints) -> int:
     import numpy as np
 
     from .._estimator._robust import Robust
+    from .._measured import _coverage
     from .._measured._arx import best_arx
     from .._measured._loop import (
         default_threads,
@@ -544,7 +575,21 @@ def _run_loop(args, checkpoints) -> int:
         for name, pair in models.items()
     ]
     by_model = {name: [s for s in scores if s.model == name] for name in models}
-    warnings = verdict(by_model["final model"], by_model["linear ARX"])
+    # where the scored records go that the estimation records did not (`_coverage`),
+    # every record as measured, in its own units
+    covered = _coverage.coverage(
+        [(_name(r), r.u, r.y) for r in estimation],
+        [
+            (_name(r), role, r.u, r.y)
+            for role, records in zip(("validation", "test"), scored_records, strict=True)
+            for r in records
+        ],
+        u_map=scaling.input_to_physical,
+        y_scale=scaling.y_scale,
+    )
+    warnings = verdict(
+        by_model["final model"], by_model["linear ARX"], _coverage.uncovered(covered)
+    )
     if unstable_arx is not None:
         warnings.append(
             "No stable linear ARX model fits the estimation records (the best one's largest "
@@ -584,6 +629,12 @@ def _run_loop(args, checkpoints) -> int:
         if s.role == "test"
     ]
     full["verdict"] = warnings
+    full["coverage"] = {
+        "records": [r.to_dict() for r in covered],
+        "sentences": _coverage.sentences(covered),
+        "outside_limit": _coverage.OUTSIDE,
+        "span_limit": _coverage.SPAN,
+    }
     a = valid["linear ARX"]
     full["arx"] = {
         "na": arx.orders[0],
@@ -607,7 +658,7 @@ def _run_loop(args, checkpoints) -> int:
     keys += ("prediction_error_before", "prediction_error_after", "init_samples")
     keys += ("effect_added", "actions", "structure_before", "structure_after")
     keys += ("significance", "candidates", "residual_tests", "standard_errors_after")
-    keys += ("test", "verdict", "programs_compiled", "integrating")
+    keys += ("test", "verdict", "coverage", "programs_compiled", "integrating")
     if bench is not None:
         keys += ("benchmark",)
     if window is not None:
