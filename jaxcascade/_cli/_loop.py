@@ -722,7 +722,7 @@ def _run_loop(args, checkpoints) -> int:
         print(strict_json({key: full[key] for key in keys}))
     else:
         print(_summary(full, folder))
-    for sentence in warnings:
+    for sentence in [*warnings, *full["coverage"]["sentences"]]:
         print(sentence, file=sys.stderr if args.json else sys.stdout)
     return 0
 
