@@ -230,7 +230,9 @@ def test_loop_on_several_records_with_a_window(capsys, tmp_path):
         ("r3.csv", "validation"),
         ("r4.csv", "test"),
     ]
-    assert all(r["span"] > 0.9 and r["outside"] <= 0.01 for r in cover["records"])
+    assert all(
+        r["span"] > 0.9 and r["outside"] <= 0.01 and r["beyond"] < 0.01 for r in cover["records"]
+    )
     assert result["structure_after"] == "u -> pwl(2,2) -> linear(2,2) -> backlash -> y"
     full = json.loads((tmp_path / "report" / "report.json").read_text())
     assert len(full["records"]["estimation"]) == 2

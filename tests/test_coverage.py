@@ -35,9 +35,11 @@ def test_the_shares_are_the_records_own_counts():
     )
     assert est.y_std == pytest.approx(np.std(2 * np.linspace(-1.0, 2.0, 301)))
     assert narrow.outside == 0.0 and narrow.span == pytest.approx(0.6 / 3)
-    # 7 + 3 of 100 samples beyond [-1, 2]; the overlap of [-3, 2.5] with it is all of it
+    # 7 + 3 of 100 samples beyond [-1, 2], the farthest at -3 (2 below it, of a width of
+    # 3); the overlap of [-3, 2.5] with it is all of it
     assert leaving.samples == 100 and leaving.outside == pytest.approx(0.10)
-    assert leaving.span == 1.0
+    assert leaving.beyond == pytest.approx(2 / 3) and leaving.span == 1.0
+    assert est.beyond == narrow.beyond == inside.beyond == 0.0
     assert inside.outside == 0.0 and inside.span == pytest.approx((inside.u_max - inside.u_min) / 3)
 
 
@@ -57,7 +59,7 @@ def test_sentences_flag_a_narrow_validation_and_a_test_that_leaves_the_range():
     assert len(said) == 2
     assert said[0].startswith("The validation record narrow.csv spans 20 %")
     assert said[1].startswith("10.0 % of the test record leaving.csv's samples")
-    assert "[-1, 2]" in said[1]
+    assert "[-1, 2]" in said[1] and "at most 67 % of the range's width beyond it" in said[1]
     assert _coverage.uncovered(rows) == {("narrow.csv", "validation"), ("leaving.csv", "test")}
     # within the limits: nothing said
     assert _coverage.OUTSIDE == 0.01 and _coverage.SPAN == 0.5

@@ -173,7 +173,8 @@ def _coverage_lines(cover: dict | None) -> list[str]:
         return []
     lines = [
         "Input coverage, in the records' units (`outside`: the share of a record's "
-        "samples whose input lies outside the estimation records' range; `span`: the "
+        "samples whose input lies outside the estimation records' range; `beyond`: how "
+        "far the farthest of them lies outside it, as a share of its width; `span`: the "
         "share of that range its input covers). A sentence below flags a validation or "
         f"test record outside it on more than {100 * cover['outside_limit']:g} % of its "
         f"samples, and a validation record spanning less than "
@@ -183,14 +184,15 @@ def _coverage_lines(cover: dict | None) -> list[str]:
     lines += [f"- {sentence}" for sentence in cover["sentences"]]
     lines += [""] if cover["sentences"] else []
     lines += [
-        "| record | role | samples | input from | input to | output std | outside | span |",
-        "|---|---|---|---|---|---|---|---|",
+        "| record | role | samples | input from | input to | output std | outside | beyond "
+        "| span |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for r in cover["records"]:
         lines.append(
             f"| {r['record']} | {r['role']} | {r['samples']} | {r['u_min']:.4g} | "
             f"{r['u_max']:.4g} | {r['y_std']:.4g} | {100 * r['outside']:.1f} % | "
-            f"{100 * r['span']:.0f} % |"
+            f"{100 * r['beyond']:.0f} % | {100 * r['span']:.0f} % |"
         )
     return lines + [""]
 

@@ -11,8 +11,9 @@ structure, which is what the loop's verdict against the ARX peer otherwise sugge
 
 `coverage` gives one row per record (estimation, validation, test), in the records' own
 units: the input's range, the output's standard deviation, `outside` (the share of the
-record's samples whose input lies outside `[a, b]`) and `span` (the share of `[a, b]`
-that the record's input range overlaps). `sentences` says, for the report, where a
+record's samples whose input lies outside `[a, b]`), `beyond` (how far the farthest of
+them lies outside, as a share of `b - a`) and `span` (the share of `[a, b]` that the
+record's input range overlaps). `sentences` says, for the report, where a
 validation or test record leaves `[a, b]` on more than `OUTSIDE` of its samples and
 where a validation record spans less than `SPAN` of it. Both limits are rules of thumb,
 stated here and in the report, not fitted to any record.
@@ -41,6 +42,7 @@ class Coverage:
     u_max: float
     y_std: float
     outside: float
+    beyond: float
     span: float
 
     def to_dict(self) -> dict:
@@ -62,6 +64,7 @@ def coverage(estimation, scored, u_map=None, y_scale: float = 1.0) -> list[Cover
     rows = []
     for name, role, u, y in records:
         overlap = max(0.0, min(float(np.max(u)), high) - max(float(np.min(u)), low))
+        excess = max(0.0, low - float(np.min(u)), float(np.max(u)) - high)
         rows.append(
             Coverage(
                 record=name,
@@ -71,6 +74,7 @@ def coverage(estimation, scored, u_map=None, y_scale: float = 1.0) -> list[Cover
                 u_max=float(np.max(u)),
                 y_std=float(np.std(y)) * y_scale,
                 outside=float(np.mean((u < low) | (u > high))),
+                beyond=excess / width if width > 0 else float(excess > 0),
                 span=overlap / width if width > 0 else 1.0,
             )
         )
@@ -107,8 +111,9 @@ def sentences(rows: list[Coverage]) -> list[str]:
             out.append(
                 f"{100 * r.outside:.1f} % of the {r.role} record {r.record}'s samples have an "
                 f"input outside the estimation records' range [{low:.4g}, {high:.4g}] (its "
-                f"input: {r.u_min:.4g} to {r.u_max:.4g}): the model is extrapolated there, "
-                "and its figure on that record says how it extrapolates as much as how it fits."
+                f"input: {r.u_min:.4g} to {r.u_max:.4g}, at most {100 * r.beyond:.0f} % of "
+                "the range's width beyond it): the model is extrapolated there, and its "
+                "figure on that record says how it extrapolates as much as how it fits."
             )
         if _narrow(r):
             out.append(
