@@ -55,23 +55,23 @@ def coverage(estimation, scored, u_map=None, y_scale: float = 1.0) -> list[Cover
     units (default: as given), `y_scale` the output's scale (a standard deviation is
     only scaled)."""
     to_units = (lambda u: np.asarray(u, float)) if u_map is None else u_map
-    estimation = [(name, "estimation", u, y) for name, u, y in estimation]
-    records = [(name, role, to_units(u), np.asarray(y, float)) for name, role, u, y in estimation]
-    low = min(float(np.min(u)) for _, _, u, _ in records)
-    high = max(float(np.max(u)) for _, _, u, _ in records)
-    records += [(name, role, to_units(u), np.asarray(y, float)) for name, role, u, y in scored]
+    records = [(name, "estimation", u, y) for name, u, y in estimation] + list(scored)
+    records = [(name, role, to_units(u), np.asarray(y, float)) for name, role, u, y in records]
+    fitted = [u for _, role, u, _ in records if role == "estimation"]
+    low, high = min(float(np.min(u)) for u in fitted), max(float(np.max(u)) for u in fitted)
     width = high - low
     rows = []
     for name, role, u, y in records:
-        overlap = max(0.0, min(float(np.max(u)), high) - max(float(np.min(u)), low))
-        excess = max(0.0, low - float(np.min(u)), float(np.max(u)) - high)
+        u_min, u_max = float(np.min(u)), float(np.max(u))
+        overlap = max(0.0, min(u_max, high) - max(u_min, low))
+        excess = max(0.0, low - u_min, u_max - high)
         rows.append(
             Coverage(
                 record=name,
                 role=role,
                 samples=int(u.shape[0]),
-                u_min=float(np.min(u)),
-                u_max=float(np.max(u)),
+                u_min=u_min,
+                u_max=u_max,
                 y_std=float(np.std(y)) * y_scale,
                 outside=float(np.mean((u < low) | (u > high))),
                 beyond=excess / width if width > 0 else float(excess > 0),
