@@ -96,6 +96,10 @@ loop() {  # issue 21 (needs ../shared/data): the loop on the measured friction-d
     # issue 32: each run's model on the records it was not estimated on
     python benchmarks/brfd_amplitude.py --data "${BRFD_DATA:-../shared/data/brfd}" --runs results/brfd \
         --out results/brfd/amplitude
+    # issue 32, point 5: what a rule that scores candidates on an amplitude hold-out
+    # would see (each hysteresis effect alone, the 30 lb tests at 1.5 in held out)
+    python benchmarks/brfd_amplitude_holdout.py --data "${BRFD_DATA:-../shared/data/brfd}" \
+        --out results/brfd/amplitude_holdout --decimate 16 --jobs 1
 }
 stability() {  # issue 21, point 3 (needs ../shared/data): the loop's decision with
     # retries 0/2 x seeds 0-2, both directions, and the four main runs again; two loops at
