@@ -2,6 +2,7 @@
 commit's, alternated in fresh processes on the same machine.
 
     python benchmarks/loop_compare.py REF [--runs 3] [--n 1024] [--damper DATA]
+                                          [--cache off|cold|warm]
 
 The loop runs with its default settings on `loop_speed.py`'s synthetic input-delay
 records (`--n` samples each for estimation and validation: the declared cascade's
@@ -11,8 +12,11 @@ damper run instead (`brfd_argv`: the 30 lb harmonic tests and Imperial Valley,
 validated on Kocaeli, `--decimate 8`, the damper's effect list). `REF` is
 checked out into a temporary `git worktree` (`bench_compare.checkout`) and imports its
 own copy of the package; this checkout's runs with `PYTHONPATH` set to it. Each of
-`--runs` rounds runs both, `JAXCASCADE_CACHE=off` (every program compiled), alternating
-which goes first.
+`--runs` rounds runs both, alternating which goes first, with JAX's persistent cache
+(`--cache`): `off` (`JAXCASCADE_CACHE=off`, every program compiled, nothing written; the
+default), `cold` (an empty cache folder for every run: a user's first run, compiling and
+writing every program) or `warm` (each side's own folder, filled by one untimed run of
+that side before the rounds: a user's later runs).
 
 Prints each run's wall seconds (the whole process), programs compiled and effects
 added, then:
@@ -42,9 +46,10 @@ from bench_compare import ROOT, alternate, checkout, describe
 from loop_speed import brfd_argv, records
 
 
-def run_loop(folder: pathlib.Path, pythonpath: str, argv: list[str]) -> dict:
-    """One `jaxcascade ARGV` (a loop with `--json`) in a fresh process from `folder`."""
-    env = dict(os.environ, JAXCASCADE_CACHE="off", PYTHONPATH=pythonpath)
+def run_loop(folder: pathlib.Path, pythonpath: str, argv: list[str], cache: str = "off") -> dict:
+    """One `jaxcascade ARGV` (a loop with `--json`) in a fresh process from `folder`, JAX's
+    persistent cache in the folder `cache` (`off`: none)."""
+    env = dict(os.environ, JAXCASCADE_CACHE=cache, PYTHONPATH=pythonpath)
     command = [sys.executable, "-m", "jaxcascade", *argv]
     start = time.perf_counter()
     done = subprocess.run(command, cwd=folder, env=env, capture_output=True, text=True)
@@ -67,6 +72,13 @@ def main(argv=None) -> int:
     parser.add_argument("--runs", type=int, default=3, help="rounds, each runs both (3)")
     parser.add_argument("--n", type=int, default=1024, help="samples of each record (1024)")
     parser.add_argument("--damper", metavar="DATA", help="the damper run on DATA instead")
+    parser.add_argument(
+        "--cache",
+        choices=("off", "cold", "warm"),
+        default="off",
+        help="JAX's persistent cache: off (default), an empty folder per run, or each "
+        "side's folder filled by an untimed run first",
+    )
     args = parser.parse_args(argv)
     if args.runs < 1:
         parser.error("--runs must be at least 1")
@@ -82,9 +94,24 @@ def main(argv=None) -> int:
             with checkout(args.ref) as reference:
                 label = describe(reference)
 
+                folders = {"this": ROOT, "reference": reference}
+                kept = {w: pathlib.Path(scratch, f"cache-{w}") for w in folders}
+                runs = iter(range(10**6))
+
+                def cache(which):
+                    if args.cache == "off":
+                        return "off"
+                    if args.cache == "warm":
+                        return str(kept[which])
+                    return str(pathlib.Path(scratch, f"cache-{which}-{next(runs)}"))
+
+                if args.cache == "warm":
+                    for which, folder in folders.items():
+                        run_loop(folder, str(folder), loop, cache(which))
+
                 def run(which):
-                    folder = ROOT if which == "this" else reference
-                    return run_loop(folder, str(folder), loop)
+                    folder = folders[which]
+                    return run_loop(folder, str(folder), loop, cache(which))
 
                 def report(round_, figures):
                     this, ref = figures["this"], figures["reference"]
@@ -110,7 +137,8 @@ def main(argv=None) -> int:
     print(
         f"this ({describe(ROOT)}) / reference ({label}): wall time ratio "
         f"{statistics.median(ratios):.3f} (median of {args.runs} pairs; min {min(ratios):.3f}, "
-        f"max {max(ratios):.3f}); load {min(p[w]['load'] for p in pairs for w in p):.1f}-"
+        f"max {max(ratios):.3f}); cache {args.cache}; load "
+        f"{min(p[w]['load'] for p in pairs for w in p):.1f}-"
         f"{max(p[w]['load'] for p in pairs for w in p):.1f}"
     )
     print(
