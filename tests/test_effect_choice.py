@@ -153,3 +153,25 @@ def test_only_the_last_effect_and_only_inside_a_loop():
     with grouping(EFFECTS.values()):
         assert isinstance(choose(model).effects[-1], Choice)
     assert not isinstance(choose(model).effects[-1], Choice)
+
+
+@pytest.mark.parametrize("name", ["slack_friction", "output_drift", "prandtl_ishlinskii"])
+def test_records_of_one_loop_share_one_simulation_program(name):
+    # `padded_to`: the records of a loop (here of three length buckets) simulated by one
+    # program, each padded to the longest's bucket; the simulation is causal and every
+    # sample's arithmetic the same as in its own bucket's program, so bit for bit the
+    # output of each record simulated alone (an effect's state, a drift's sample index,
+    # the blocked pole recursion: each sample depends on the samples before it only)
+    from jaxcascade._measured._effects import padded_to, simulate_padded
+
+    model = MODELS[name]()
+    u = _input()
+    records = [u[:90], u[:170], u[:400]]  # buckets 96, 176 and 400
+    alone = [simulate_padded(model, r) for r in records]
+    with padded_to([len(r) for r in records]):
+        before = compile_count()
+        shared = [simulate_padded(model, r) for r in records]
+        assert compile_count() - before <= 1  # the longest bucket's, if not compiled yet
+    for a, b in zip(alone, shared, strict=True):
+        for x, z in zip(a, b, strict=True):
+            np.testing.assert_array_equal(x, z)

@@ -39,6 +39,7 @@ from __future__ import annotations
 import contextvars
 import dataclasses
 import functools
+import inspect
 import os
 import time
 
@@ -49,7 +50,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array
 
-from .._compile import bound, compile_count, exported, filter_jit, over_bound, pack, pad
+from .._compile import bound, compile_count, exported, filter_jit, over_bound, pack
 from .._estimator._efficiency import standard_errors
 from .._estimator._levenberg import least_squares
 from .._estimator._refine import from_unconstrained, to_unconstrained
@@ -71,6 +72,8 @@ from ._effects import (
     backlash_of,
     choose,
     grouping,
+    padded,
+    padded_to,
     plain,
     simulate_padded,
     simulate_with_switches,
@@ -127,7 +130,7 @@ def initialised_output(model: ExtendedModel, u, y, start: int, n: int) -> np.nda
 def _parallel(effect: Effect, u) -> np.ndarray:
     """`effect.parallel(u)` of one record (host side, padded like `_simulate`)."""
     u = np.asarray(u)
-    return np.asarray(_parallel_jit(effect, jnp.asarray(pad(u))))[: u.shape[0]]
+    return np.asarray(_parallel_jit(effect, jax.device_put(padded(u))))[: u.shape[0]]
 
 
 def _records(u, y):
@@ -621,12 +624,26 @@ class LoopResult:
 
 def _grouped(loop):
     """`loop` with the groups of the effects it may try in force (`_effects._choice`):
-    members of one group are fitted and scored by one program."""
+    members of one group are fitted and scored by one program; and its records'
+    simulations padded to one length (`_effects.padded_to`): one program per structure
+    for every record."""
+
+    signature = inspect.signature(loop)
 
     @functools.wraps(loop)
     def run(*args, effects: tuple[str, ...] | None = None, **kwargs):
         names = tuple(effects or EFFECTS)
-        with grouping([EFFECTS[name] for name in names if name in EFFECTS], EFFECTS.values()):
+        # every record of the loop simulated by one program per structure (`padded_to`)
+        given = signature.bind_partial(*args, **kwargs).arguments
+        records = (
+            *_records(given["u_est"], given["y_est"])[0],
+            *_records(given["u_val"], given["y_val"])[0],
+        )
+        lengths = [np.shape(u)[-1] for u in records]
+        with (
+            grouping([EFFECTS[name] for name in names if name in EFFECTS], EFFECTS.values()),
+            padded_to(lengths),
+        ):
             return loop(*args, effects=effects, **kwargs)
 
     return run

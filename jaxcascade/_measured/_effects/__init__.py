@@ -38,6 +38,12 @@ from ._base import (
     backlash_of as backlash_of,
 )
 from ._base import (
+    padded as padded,
+)
+from ._base import (
+    padded_to as padded_to,
+)
+from ._base import (
     plain as plain,
 )
 from ._base import (

@@ -20,6 +20,8 @@ To add an effect: subclass `Effect` in a module of this package and add it to `E
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import dataclasses
 from typing import ClassVar
 
@@ -29,7 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from ..._compile import filter_jit, pad
+from ..._compile import bucket_length, filter_jit, pad
 from ..._system._general_backlash import GeneralBacklash, general_signals
 from ..._system._model import CascadeParams, Orders
 from ..._system._simulate import signals
@@ -272,13 +274,42 @@ def simulate_with_switches(model: ExtendedModel, u):
 _simulate_jit = filter_jit(simulate_with_switches)
 
 
+# The length every record is padded to within `padded_to` (0: each its own bucket).
+_LENGTH = contextvars.ContextVar("padded_length", default=0)
+
+
+@contextlib.contextmanager
+def padded_to(lengths):
+    """Within the block, `simulate_padded` pads every record no longer than the bucket of
+    the longest of `lengths` (`_compile.bucket_length`) to that bucket: the records of
+    one loop (its estimation and validation records, of many lengths on measured data)
+    share one program per model structure instead of one per structure and length
+    bucket. The simulation is causal, so the padding changes nothing on the record's own
+    samples; the longer scan costs run time on the shorter records (a few milliseconds
+    per record on the damper's), far less than a program's compile time. A thread
+    pool's tasks see it where they run in a copy of the context."""
+    token = _LENGTH.set(bucket_length(max(int(n) for n in lengths)))
+    try:
+        yield
+    finally:
+        _LENGTH.reset(token)
+
+
 def simulate_padded(model: ExtendedModel, u) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """`simulate_with_switches` of one record on the host: the input padded to its
-    length's bucket (`_compile.pad`), the outputs `(y, x, y_cascade)` cut back, NumPy
-    arrays."""
+    length's bucket (`_compile.pad`), or to the common length of `padded_to`, the outputs
+    `(y, x, y_cascade)` cut back, NumPy arrays."""
     u = np.asarray(u)
-    out = _simulate_jit(model, jax.device_put(pad(u)))
+    out = _simulate_jit(model, jax.device_put(padded(u)))
     return tuple(np.asarray(a)[: u.shape[0]] for a in out)
+
+
+def padded(u) -> np.ndarray:
+    """A 1-D record padded (`_compile.pad`) to its length's bucket, or to the common
+    length of `padded_to` where it is no longer."""
+    u = np.asarray(u)
+    common = _LENGTH.get()
+    return pad(u, common if common >= u.shape[0] else None)
 
 
 class OutputOffset(Effect):
