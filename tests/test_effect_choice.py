@@ -175,3 +175,19 @@ def test_records_of_one_loop_share_one_simulation_program(name):
     for a, b in zip(alone, shared, strict=True):
         for x, z in zip(a, b, strict=True):
             np.testing.assert_array_equal(x, z)
+
+
+def test_a_record_far_shorter_than_the_longest_keeps_its_own_bucket():
+    # simulating 100 samples at a bucket of 2,000 would cost more than its own program
+    from jaxcascade._compile import bucket_length
+    from jaxcascade._measured._effects import padded_to
+    from jaxcascade._measured._effects._base import SHARED_WITHIN, padded
+
+    u = np.arange(2000.0)
+    common = bucket_length(2000)
+    with padded_to([100, 400, 2000]):
+        assert padded(u[:400]).shape == (common,)  # within SHARED_WITHIN of the longest
+        assert common > SHARED_WITHIN * bucket_length(100)
+        assert padded(u[:100]).shape == (bucket_length(100),)  # its own bucket
+        assert padded(u).shape == (common,)
+    assert padded(u[:400]).shape == (bucket_length(400),)  # outside a loop: its own

@@ -286,7 +286,8 @@ def padded_to(lengths):
     share one program per model structure instead of one per structure and length
     bucket. The simulation is causal, so the padding changes nothing on the record's own
     samples; the longer scan costs run time on the shorter records (a few milliseconds
-    per record on the damper's), far less than a program's compile time. A thread
+    per record on the damper's), far less than a program's compile time, and a record
+    far shorter than the longest keeps its own bucket (`SHARED_WITHIN`). A thread
     pool's tasks see it where they run in a copy of the context."""
     token = _LENGTH.set(bucket_length(max(int(n) for n in lengths)))
     try:
@@ -304,12 +305,19 @@ def simulate_padded(model: ExtendedModel, u) -> tuple[np.ndarray, np.ndarray, np
     return tuple(np.asarray(a)[: u.shape[0]] for a in out)
 
 
+# A record whose bucket is shorter than the common length by more than this factor keeps
+# its own bucket: simulating it at the common length would cost more than a program.
+SHARED_WITHIN = 8
+
+
 def padded(u) -> np.ndarray:
     """A 1-D record padded (`_compile.pad`) to its length's bucket, or to the common
-    length of `padded_to` where it is no longer."""
+    length of `padded_to` where it is no longer and its bucket at least
+    `1 / SHARED_WITHIN` of it (a short record beside a long one keeps its own)."""
     u = np.asarray(u)
-    common = _LENGTH.get()
-    return pad(u, common if common >= u.shape[0] else None)
+    common, own = _LENGTH.get(), bucket_length(u.shape[0])
+    shared = u.shape[0] <= common <= SHARED_WITHIN * own
+    return pad(u, common if shared else own)
 
 
 class OutputOffset(Effect):
