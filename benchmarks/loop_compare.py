@@ -33,6 +33,7 @@ Exit code 0 unless a loop failed (2).
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import os
 import pathlib
@@ -96,7 +97,7 @@ def main(argv=None) -> int:
 
                 folders = {"this": ROOT, "reference": reference}
                 kept = {w: pathlib.Path(scratch, f"cache-{w}") for w in folders}
-                runs = iter(range(10**6))
+                runs = itertools.count()
 
                 def cache(which):
                     if args.cache == "off":
