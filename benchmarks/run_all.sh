@@ -4,8 +4,10 @@
 # loops at once, as their committed tables were made). Every command of
 # results/README.md's table is here, in the step its row names
 # (tests/test_results_listing.py checks both ways). The whole run has not been
-# timed (on 2 cores `stability` alone took about 25 minutes: the wall times in
-# results/brfd_stability/resources.csv, two at a time).
+# timed end to end. The wall times its steps' results record (or, where a file records
+# none, the commit that regenerated it) add up to about three hours on a 2-core
+# machine, two thirds of it in `general`, the three test steps, `noise`, `stability`
+# and `loop` (results/brfd_stability/resources.csv: its runs, two at a time).
 #   bash benchmarks/run_all.sh            # every step (the list is printed first)
 #   bash benchmarks/run_all.sh sweeps     # only the named steps
 #   bash benchmarks/run_all.sh list       # the steps and their commands, nothing run
