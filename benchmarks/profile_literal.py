@@ -91,10 +91,18 @@ def main(argv=None) -> int:
         stopping_rule,
         voros,
     )
-    from jaxcascade._estimator._normal_equations import normal_equations, resolve, solve_step
-    from jaxcascade._system._examples import example
-    from jaxcascade._system._model import CascadeParams
-    from jaxcascade._system._simulate import measure, uniform_input
+
+    # modules that issue 34's layout (f8d2198) moved: the `--commit` baseline has the old
+    layout = _layout("_normal_equations", "_estimator._normal_equations")
+    normal_equations, resolve, solve_step = (
+        layout.normal_equations,
+        layout.resolve,
+        layout.solve_step,
+    )
+    example = _layout("_examples", "_system._examples").example
+    CascadeParams = _layout("_model", "_system._model").CascadeParams
+    simulate = _layout("_simulate", "_system._simulate")
+    measure, uniform_input = simulate.measure, simulate.uniform_input
 
     ex = example(1)
     orders, n, iterations, batch = ex.orders, 4000, 20, args.batch
@@ -235,6 +243,26 @@ def main(argv=None) -> int:
         with open(args.out, "w") as file:
             file.write(text + "\n")
     return 0
+
+
+def _layout(old: str, new: str):
+    """The module `jaxcascade.OLD` where the profiled package has it (the `--commit`
+    baseline, before issue 34's layout moved it), else `jaxcascade.NEW`. The old name
+    first, and only a file of the profiled package's own folder: an editable install of
+    today's package would otherwise lend the baseline its new modules."""
+    import importlib
+
+    import jaxcascade
+
+    folder = pathlib.Path(jaxcascade.__file__).resolve().parent
+    for name in (old, new):
+        try:
+            module = importlib.import_module(f"jaxcascade.{name}")
+        except ModuleNotFoundError:
+            continue
+        if folder in pathlib.Path(module.__file__).resolve().parents:
+            return module
+    raise ModuleNotFoundError(f"neither jaxcascade.{old} nor jaxcascade.{new} in {folder}")
 
 
 def at_commit(args) -> int:
