@@ -4,10 +4,11 @@
 # loops at once, as their committed tables were made). Every command of
 # results/README.md's table is here, in the step its row names
 # (tests/test_results_listing.py checks both ways). The whole run has not been
-# timed end to end. The wall times its steps' results record (or, where a file records
-# none, the commit that regenerated it) add up to about three hours on a 2-core
-# machine, two thirds of it in `general`, the three test steps, `noise`, `stability`
-# and `loop` (results/brfd_stability/resources.csv: its runs, two at a time).
+# timed in one go. Its steps, each run on a clean clone on 2026-11-28 (the commits that
+# regenerated them say how long), took about 2 h 45 min together on a 2-core machine
+# (avx512), two thirds of it in the three test steps (about 32 min), `loop` with
+# `speed_damper` and `nonlinear` (25), `noise` (20), `stability` (17, two loops at a
+# time) and `general` (16).
 #   bash benchmarks/run_all.sh            # every step (the list is printed first)
 #   bash benchmarks/run_all.sh sweeps     # only the named steps
 #   bash benchmarks/run_all.sh list       # the steps and their commands, nothing run
