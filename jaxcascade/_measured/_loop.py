@@ -245,10 +245,10 @@ def refit_all(model: ExtendedModel, start: Start, u, y, max_steps: int = 150):
     groups = pack(us, ys)
     dtype = groups[0][0].dtype
     effect = jax.tree_util.tree_map(lambda leaf: jnp.asarray(leaf, dtype), start.effect)
-    bounds = jnp.asarray(breakpoint_bounds(us), dtype)
+    bounds = jax.device_put(breakpoint_bounds(us).astype(dtype))
     # one program for every member of the effects' groups in force (`_effects._choice`)
     models, costs, status = _refit(
-        jnp.asarray(start.vectors, dtype),
+        jax.device_put(np.asarray(start.vectors, dtype)),
         choice(effect),
         model,
         groups,
@@ -306,7 +306,7 @@ def fit_parallel(model: ExtendedModel, effect_class, u, y, alternations: int = 1
     return final, float(np.mean(errors**2)), label
 
 
-@filter_jit
+@exported
 def _standard_errors(model: ExtendedModel, groups):
     """`_efficiency.standard_errors` of `model` on packed records (`pack`): the masked
     simulation of every group, each record whitened apart."""

@@ -31,7 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from ..._compile import bucket_length, filter_jit, pad
+from ..._compile import bucket_length, exported, pad
 from ..._system._general_backlash import GeneralBacklash, general_signals
 from ..._system._model import CascadeParams, Orders
 from ..._system._simulate import signals
@@ -171,7 +171,8 @@ def _repeat(model, count):
 
 
 def _batched(effect_class, **values):
-    return effect_class(**{k: jnp.asarray(np.asarray(v, float)) for k, v in values.items()})
+    # `device_put`, not `jnp.asarray`: an eager conversion compiles a program per shape
+    return effect_class(**{k: jax.device_put(np.asarray(v, float)) for k, v in values.items()})
 
 
 class ExtendedModel(eqx.Module):
@@ -270,8 +271,8 @@ def simulate_with_switches(model: ExtendedModel, u):
 
 # One compiled program per model structure and record-length bucket for every host-side
 # simulation of the loop (its scoring, the effects' starts): the same model simulated
-# by two callers is one program, not two.
-_simulate_jit = filter_jit(simulate_with_switches)
+# by two callers is one program, not two; kept across processes (`_compile.exported`).
+_simulate_jit = exported(simulate_with_switches)
 
 
 # The length every record is padded to within `padded_to` (0: each its own bucket).

@@ -55,7 +55,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from ..._compile import jit, pack, pad
+from ..._compile import exported, pack, pad
 from ..._status import Status
 from ._base import (
     Effect,
@@ -105,7 +105,8 @@ def _stops(u, thresholds) -> np.ndarray:
     """`stop_operators` of one record on the host, its length padded to a bucket (one
     compiled program per bucket and threshold count, `_compile.pad`)."""
     n = np.shape(u)[0]
-    return np.asarray(stop_operators(jnp.asarray(pad(u)), jnp.asarray(thresholds)))[:n]
+    thresholds = jax.device_put(np.asarray(thresholds))
+    return np.asarray(stop_operators(jax.device_put(pad(u)), thresholds))[:n]
 
 
 def _span(u) -> float:
@@ -342,7 +343,7 @@ class BacklashFriction(_LinearPath):
             for gap, travel in itertools.product(cls.gap_fractions, cls.travel_fractions)
         ]
         zs, costs, statuses = _fit_backlash_friction(
-            jnp.asarray(starts),
+            jax.device_put(np.asarray(starts)),
             groups,
             weights,
             tuple(cls.start_fractions),
@@ -372,11 +373,12 @@ class BacklashFriction(_LinearPath):
         return effect, label
 
 
-@jit(static_argnames=("starts", "max_steps", "ftol"))
+@exported
 def _fit_backlash_friction(z0, groups, weights, starts, max_steps, ftol):
     """Levenberg-Marquardt of `BacklashFriction.fit` from each row of `z0` on packed
     records (`_compile.pack`), the starts side by side (`vmap`): one compiled program
-    per record buckets and number of starts, not per call. Returns each start's
+    per record buckets and number of starts, not per call, kept across processes
+    (`_compile.exported`; `starts`, `max_steps` and `ftol` are static). Returns each start's
     parameters, cost and `Status` code."""
     from ..._estimator._levenberg import least_squares
 
