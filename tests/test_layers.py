@@ -10,7 +10,7 @@ PACKAGE = pathlib.Path(__file__).parents[1] / "jaxcascade"
 
 # Lowest first, as in docs/architecture.md; a package (folder) is one room.
 LAYERS = [
-    {"_status", "_metrics", "_version", "_linalg", "_compile", "_names", "_defaults"},
+    {"_status", "_metrics", "_version", "_linalg", "_compile", "_native", "_names", "_defaults"},
     {"_system"},
     {"_data"},
     {"_experiment"},

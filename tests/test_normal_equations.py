@@ -7,7 +7,7 @@ import oracle
 import pytest
 
 import jaxcascade
-from jaxcascade import CascadeParams, Orders, Status, example, initial_guess, measure
+from jaxcascade import CascadeParams, Orders, Status, _native, example, initial_guess, measure
 from jaxcascade._compile import filter_jit
 from jaxcascade._estimator import _fused
 from jaxcascade._estimator._literal import voros_step
@@ -120,23 +120,56 @@ def test_backend_resolution():
 
 def test_disabled_kernel_is_reported(monkeypatch, tmp_path):
     monkeypatch.setenv("JAXCASCADE_FUSED", "off")
-    _fused._build.cache_clear()
+    _native.build.cache_clear()
     try:
-        path, why = _fused._build()
+        path, why = _native.build()
         assert path is None and "JAXCASCADE_FUSED" in why
     finally:
         monkeypatch.delenv("JAXCASCADE_FUSED")
-        _fused._build.cache_clear()
+        _native.build.cache_clear()
 
 
 def test_missing_compiler_is_reported(monkeypatch, tmp_path):
     # A fresh build folder and no compiler: no kernel, a reason, and no exception.
     monkeypatch.setenv("JAXCASCADE_BUILD_DIR", str(tmp_path))
     monkeypatch.setenv("CXX", "no-such-compiler")
-    monkeypatch.setattr(_fused.shutil, "which", lambda name: None)
-    _fused._build.cache_clear()
+    monkeypatch.setattr(_native.shutil, "which", lambda name: None)
+    _native.build.cache_clear()
     try:
-        path, why = _fused._build()
+        path, why = _native.build()
         assert path is None and "compiler" in why
     finally:
-        _fused._build.cache_clear()
+        _native.build.cache_clear()
+
+
+def test_a_build_in_the_background_is_the_build_a_later_call_waits_for(monkeypatch, tmp_path):
+    # A stand-in compiler that takes a while and counts its runs: the command's
+    # background build and the estimator's own call while it runs compile once and
+    # agree on the file.
+    import sys
+    import threading
+
+    runs = tmp_path / "runs"
+    compiler = tmp_path / "slow-c++"
+    compiler.write_text(
+        f"#!{sys.executable}\n"
+        "import pathlib, sys, time\n"
+        "time.sleep(0.5)\n"
+        f"with open({str(runs)!r}, 'a') as f: f.write('x')\n"
+        "pathlib.Path(sys.argv[sys.argv.index('-o') + 1]).write_bytes(b'')\n"
+    )
+    compiler.chmod(0o755)
+    monkeypatch.setenv("JAXCASCADE_BUILD_DIR", str(tmp_path / "build"))
+    monkeypatch.setenv("CXX", str(compiler))
+    _native.build.cache_clear()
+    try:
+        _native.build_in_background()
+        path, why = _native.build()
+        for thread in threading.enumerate():
+            if thread.name == "jaxcascade-kernel-build":
+                thread.join(timeout=30)
+        assert why == "" and path.exists() and path.parent == tmp_path / "build"
+        assert runs.read_text() == "x"
+        assert not [p for p in (tmp_path / "build").iterdir() if p.is_dir()]  # no scratch left
+    finally:
+        _native.build.cache_clear()

@@ -78,6 +78,11 @@ def _after_fit():
 
 
 def run_fit(args) -> int:
+    from .._native import build_in_background
+
+    # the robust fit needs the native kernel: on a machine's first run it compiles
+    # on another core while this command imports and reads its records (`_native`)
+    build_in_background()
     # imported here, not at the top: `--help` answers without importing JAX
     from .._data import read_record
     from .._estimator import estimator

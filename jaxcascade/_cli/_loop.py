@@ -408,6 +408,12 @@ def run_loop(args) -> int:
 
 
 def _run_loop(args, checkpoints) -> int:
+    from .._native import build_in_background
+
+    # the declared cascade's robust fit needs the native kernel: on a machine's first
+    # run it compiles on another core while this command imports and reads its records
+    # (`_native`)
+    build_in_background()
     # imported here, not at the top: `--help` answers without importing JAX
     import jax
     import numpy as np
