@@ -316,8 +316,10 @@ def initialise(
     """The state before sample `start - n` fitted to the measured output `y` over
     `[start - n, start)` (module docstring); the model's parameters are used, never
     changed. `u`, `y`: one record (1-D, equal lengths)."""
-    u = jnp.asarray(u)
-    y = jnp.asarray(y, u.dtype)
+    # on the host, and onto the device padded (`device_put`: an eager `jnp.asarray`
+    # compiles a program per shape)
+    u = np.asarray(u, jax.dtypes.canonicalize_dtype(np.asarray(u).dtype))
+    y = np.asarray(y, u.dtype)
     T = u.shape[0]
     if y.shape != u.shape or u.ndim != 1:
         raise ValueError(
@@ -330,15 +332,15 @@ def initialise(
         )
     start = min(max(int(start), n), T)
     first = start - n
-    u_padded = jnp.asarray(pad(np.asarray(u)))
-    y_padded = jnp.asarray(pad(np.asarray(y)))
+    u_padded = jax.device_put(pad(u))
+    y_padded = jax.device_put(pad(y))
     # one program for every member of an effect's group in force (`_effects._choice`)
     chosen = choose(model)
     fit = _initialise(
         chosen,
         u_padded,
         y_padded,
-        jnp.asarray(first, jnp.int32),
+        jax.device_put(np.int32(first)),
         n=int(n),
         grid=tuple(float(g) for g in grid),
         max_steps=int(max_steps),

@@ -31,8 +31,9 @@ from typing import ClassVar
 import numpy as np
 from jaxtyping import Array, Float
 
-from ..._system._general_backlash import GeneralBacklash, branch_report, general_switches
+from ..._system._general_backlash import GeneralBacklash, branch_report
 from ..._system._model import CascadeParams
+from ..._system._simulate import backlash_switches
 from ._base import Effect, ExtendedModel, Start, _batched, _repeat, simulate_padded
 
 
@@ -82,8 +83,9 @@ class CurvedBacklash(Effect):
         for u, _, residual in records:
             _, x, y_cascade = _signals(model, u)
             previous = np.concatenate([[0.0], y_cascade[:-1]])
-            straight = GeneralBacklash.straight(p)
-            g1, g2 = (np.asarray(g) for g in general_switches(straight, x, previous))
+            # the straight backlash's switches, on the host (`general_switches` of
+            # `GeneralBacklash.straight(p)` is `backlash_switches`, the same operations)
+            g1, g2 = backlash_switches(x, previous, cL, float(p.mR), cR)
             for side, active, s in (("left", g1 > 0, x + cL), ("right", g2 > 0, x - cR)):
                 sides[side][0].append(s[active])
                 sides[side][1].append(np.asarray(residual)[active])

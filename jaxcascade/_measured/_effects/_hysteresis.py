@@ -532,7 +532,7 @@ class DahlFriction(_LinearPath):
 
         def features(fraction, u):
             n = np.shape(u)[0]
-            force = dahl(jnp.asarray(pad(u)), 1.0 / (fraction * span), 1.0)
+            force = dahl(jax.device_put(pad(u)), 1.0 / (fraction * span), 1.0)
             return np.asarray(force)[:n, None]
 
         fraction, (level,), _ = cross_validate(list(cls.fractions), features, records)
