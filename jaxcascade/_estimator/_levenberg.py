@@ -41,6 +41,7 @@ from collections.abc import Callable
 import jax
 import jax.numpy as jnp
 
+from .._compile import carried_like
 from .._linalg import spd_solve
 from .._status import Status
 
@@ -118,18 +119,26 @@ def levenberg_marquardt(
 
     one = jnp.ones((), dtype)
     size = z0.shape[0]
+    # every element of the carry a value of `z0`: under `vmap` the loop's body is traced
+    # once less (`_compile.carried_like`)
     state = (
         z0,
-        jnp.zeros(
-            (residual_size,) if residual_size else jax.eval_shape(evaluate, z0)[0].shape, dtype
+        *carried_like(
+            z0,
+            (
+                jnp.zeros(
+                    (residual_size,) if residual_size else jax.eval_shape(evaluate, z0)[0].shape,
+                    dtype,
+                ),
+                jnp.asarray(jnp.inf, dtype),
+                jnp.eye(size, dtype=dtype),
+                jnp.zeros((size,), dtype),
+                damping * one,
+                2 * one,
+                jnp.zeros((), jnp.int32),
+                jnp.asarray(_RUNNING, jnp.int32),
+            ),
         ),
-        jnp.asarray(jnp.inf, dtype),
-        jnp.eye(size, dtype=dtype),
-        jnp.zeros((size,), dtype),
-        damping * one,
-        2 * one,
-        jnp.zeros((), jnp.int32),
-        jnp.asarray(_RUNNING, jnp.int32),
     )
     # max_steps counts the steps after the start's evaluation
     z, r, cost, _, _, _, _, steps, status = jax.lax.while_loop(running, body, state)
@@ -137,13 +146,6 @@ def levenberg_marquardt(
     status = jnp.where(status == _RUNNING, Status.max_iterations, status).astype(jnp.int32)
     mean = cost / r.shape[0]
     return z, jnp.where(jnp.isfinite(mean), mean, jnp.inf), status, steps
-
-
-def _like(z, value):
-    """`value`, computed from `z` (a `select` on a predicate that is always False): under
-    `vmap` it is batched wherever `z` is. XLA folds the select away."""
-    never = jnp.zeros((), bool) & jnp.isnan(z[0])
-    return jnp.where(never, jnp.zeros_like(value), value)
 
 
 def least_squares(
@@ -246,20 +248,27 @@ def least_squares(
         trial = z - jnp.where(factored & jnp.all(jnp.isfinite(solution)), solution, jnp.inf)
         return z, r, JtJ, Jtr, trial, s.astype(dtype), step + 1, status.astype(jnp.int32)
 
-    # Every element of the carry starts as a value of `z0` (`_like`): under `vmap` (the
-    # starts side by side) JAX's while-loop batching rule then finds every element
-    # batched at its first look at the body, instead of tracing the body once more to
-    # learn that the zeros and counters become batched (a third of the tracing of the
-    # loop's refits and initial-state fits). The values are the same.
+    # every element of the carry a value of `z0`: under `vmap` (the starts side by side)
+    # the loop's body is traced once less (`_compile.carried_like`)
     state = (
         z0,
-        _like(z0, jnp.zeros((T,), dtype)),
-        _like(z0, jnp.zeros((size, size), dtype)),
-        _like(z0, jnp.zeros((size,), dtype)),
+        *carried_like(
+            z0,
+            (
+                jnp.zeros((T,), dtype),
+                jnp.zeros((size, size), dtype),
+                jnp.zeros((size,), dtype),
+            ),
+        ),
         z0,
-        _like(z0, jnp.ones((), dtype)),
-        _like(z0, jnp.zeros((), jnp.int32)),
-        _like(z0, jnp.asarray(_RUNNING, jnp.int32)),
+        *carried_like(
+            z0,
+            (
+                jnp.ones((), dtype),
+                jnp.zeros((), jnp.int32),
+                jnp.asarray(_RUNNING, jnp.int32),
+            ),
+        ),
     )
     z, r, _, _, _, _, steps, status = jax.lax.while_loop(running, body, state)
     status = jnp.where(status == _RUNNING, Status.max_iterations, status).astype(jnp.int32)

@@ -11,7 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, PRNGKeyArray
 
-from .._compile import jit
+from .._compile import carried_like, jit
 from .._status import Status
 from .._system._model import CascadeParams, Orders, is_admissible
 from .._system._validate import is_traced, record
@@ -329,7 +329,9 @@ def _voros(
     status = jnp.where(accepted & (max_iterations <= 1), Status.max_iterations, status)
     history = jnp.broadcast_to(start, (max_iterations + 1, orders.size))
     history = history.at[1].set(vector)
-    zero = jnp.zeros((), dtype)
+    # the amplitude a value of the start: under `vmap` the loop's body is traced once
+    # less (`_compile.carried_like`)
+    zero = carried_like(vector, jnp.zeros((), dtype))
     carry = (jnp.asarray(1) * accepted, vector, history, status, cost, zero, singular & accepted)
     rows = jnp.arange(max_iterations + 1)
 
