@@ -186,9 +186,10 @@ def carried_like(reference, value):
     a `scan`'s carry whose leaves would otherwise be constants. Under `vmap` each leaf is
     then batched wherever `reference` is, and JAX's batching rule for the loop, which
     traces the body again until it knows which elements of the carry are batched, finds
-    that out at its first look: the loop's body is traced once less (a third of the
-    model-error loop's refit and initial-state tracing; `results/loop_speed.md`). The
-    values and the compiled program's arithmetic are the same."""
+    that out at its first look: the loop's body is traced once less (the model-error
+    loop's refit and initial-state tracing fell from 5.44 to 4.50 s and from 3.60 to
+    2.85 s, summed over a cold run with one thread). The values and the compiled
+    program's arithmetic are the same."""
     leaf = jax.tree_util.tree_leaves(reference)[0]
     never = jnp.zeros((), bool) & jnp.isnan(jnp.ravel(leaf)[0])
     return jax.tree_util.tree_map(lambda v: jnp.where(never, jnp.zeros_like(v), v), value)
