@@ -31,6 +31,12 @@ EFFECTS = (
     "dahl_friction",
     "input_backlash",
     "general_backlash",
+    "nonlinear_feedback",
+    "direct_term",
+    "velocity_friction",
+    "output_polynomial",
+    "output_fold",
+    "output_dynamics",
 )
 
 # the loop's noise model, considered beside the effects

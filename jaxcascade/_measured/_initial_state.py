@@ -59,7 +59,8 @@ from .._system._general_backlash import general_backlash
 from .._system._model import CascadeParams
 from .._system._simulate import _poles_blocked, _poles_scan, backlash_switches, pwl
 from ._effects import choose, unchoose_states
-from ._effects._base import EffectState, ExtendedModel, backlash_of, recent
+from ._effects._base import EffectState, ExtendedModel, backlash_of, recent, recursion_terms
+from ._effects._recursion import linear_with_terms
 
 # Start positions of each operator in an initial-state fit: fractions of its
 # admissible range (0: against the lower limit, 1: the upper one).
@@ -140,9 +141,13 @@ def simulate_from(model: ExtendedModel, u, state: ModelState, at=None):
     for i, effect in enumerate(model.effects):
         u, states[i] = effect.input_with_state(u, states[i], at)
     c = state.cascade
+    terms = recursion_terms(model)
     if model.cascade:
         v = pwl(model.params, u)
-        x = linear_block_from(model.params, v, c.v_past, c.x_past)
+        if terms:  # a feedback inside the linear block (`_effects._recursion`)
+            x = linear_with_terms(model.params, v, terms, c.v_past, c.x_past)
+        else:
+            x = linear_block_from(model.params, v, c.v_past, c.x_past)
         nd = backlash_of(model)
         if nd is None:
             y_cascade = backlash_from(model.params, x, c.y_prev)

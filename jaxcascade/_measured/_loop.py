@@ -36,6 +36,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import contextvars
 import dataclasses
 import functools
@@ -90,6 +91,7 @@ from ._loop_checkpoint import (
     params_to_dict,
 )
 from ._noise import ARNoise
+from ._oe import OE, cascade_vector, linear_floor
 from ._significance import (
     BANDWIDTH_RULE,
     TEST_NAME,
@@ -140,14 +142,38 @@ def _records(u, y):
     return (u,), (y,)
 
 
-def _errors(model: ExtendedModel, groups) -> Array:
+def _errors(model: ExtendedModel, groups, integrated: bool = False) -> Array:
     """The one-step prediction errors of `model` on packed records (`pack`; the
-    simulation errors for white noise), zero on the padding, one flat array."""
+    simulation errors for white noise), zero on the padding, one flat array. With
+    `integrated` (a loop whose outputs are the differences of a measured output,
+    `_integrating`) the errors of the output integrated back: each record's errors
+    summed from its start (the measured output's own level there), the criterion the
+    loop judges such a model by (`evaluate`)."""
 
     def one(u, y):
         return model.noise.innovations(simulate_with_switches(model, u)[0] - y)
 
-    return jnp.concatenate([(jax.vmap(one)(U, Y) * M).reshape(-1) for U, Y, M in groups])
+    parts = [jax.vmap(one)(U, Y) * M for U, Y, M in groups]
+    if integrated:
+        parts = [jnp.cumsum(e, axis=1) * M for e, (_, _, M) in zip(parts, groups, strict=True)]
+    return jnp.concatenate([e.reshape(-1) for e in parts])
+
+
+# Whether the loop's refits fit the output integrated back (`_errors`): set by a loop
+# whose outputs are differences (`integrated_fits`); threads see it in a copy of the
+# context, as the groups.
+_INTEGRATED = contextvars.ContextVar("jaxcascade_integrated_fits", default=False)
+
+
+@contextlib.contextmanager
+def integrated_fits(on: bool = True):
+    """Within the block every refit (`refit_all`) minimises the error of the output
+    integrated back (`_errors`), not of its difference."""
+    token = _INTEGRATED.set(bool(on))
+    try:
+        yield
+    finally:
+        _INTEGRATED.reset(token)
 
 
 # Input samples kept beyond the outermost breakpoints in a refit (at least this many, and
@@ -196,6 +222,7 @@ def _refit(
     orders: Orders,
     max_steps: int,
     bounds,
+    integrated: bool = False,
 ):
     """Output-error refit of the current model with `new` added, from a batch of starts
     (`vmap` over `vectors` and the leading axis of `new`'s parameters), on the packed
@@ -224,7 +251,7 @@ def _refit(
         def residual(z, args):
             # With a noise model the fit minimises the one-step prediction error (its
             # innovation; the simulation error itself for white noise).
-            return _errors(unpack(z), groups)
+            return _errors(unpack(z), groups, integrated)
 
         z, cost, status, _ = least_squares(residual, z0, None, max_steps=max_steps)
         return unpack(z), cost, status
@@ -255,6 +282,7 @@ def refit_all(model: ExtendedModel, start: Start, u, y, max_steps: int = 150):
         start.orders,
         max_steps,
         bounds,
+        _INTEGRATED.get(),
     )
     models = unchoose(models)
     costs = np.asarray(costs)
@@ -392,6 +420,9 @@ class Evaluation:
     window_error: float | None = None
     innovation: np.ndarray | None = None
     prediction_error: float | None = None
+    # where the outputs are differences of the measured output (`integrating`): the
+    # residual of the output integrated back, each scored part summed from its start
+    integrated_residual: np.ndarray | None = None
 
 
 def evaluate(
@@ -456,10 +487,12 @@ def evaluate(
     scored = join([q[6] for q in parts])
     level = join([q[7] for q in parts])
     innovations = join([innovations_np(model.noise, q[2]) for q in parts])
+    integrated_residual = None
     if integrating:
-        error = score(
-            join([np.cumsum(q[1]) for q in parts]), join([np.cumsum(q[6]) for q in parts])
-        )
+        measured = join([np.cumsum(q[1]) for q in parts])
+        integrated = join([np.cumsum(q[6]) for q in parts])
+        error = score(measured, integrated)
+        integrated_residual = measured - integrated
     else:
         error = score(y_s, scored)
     tests = residual_tests(
@@ -475,7 +508,16 @@ def evaluate(
         as_scored = np.cumsum if integrating else np.asarray
         window_error = score(as_scored(np.asarray(ys[0])[slice(*window)]), as_scored(parts[0][5]))
     prediction_error = score(y_s, y_s - innovations)
-    return Evaluation(residual, y_sim, error, tests, window_error, innovations, prediction_error)
+    return Evaluation(
+        residual,
+        y_sim,
+        error,
+        tests,
+        window_error,
+        innovations,
+        prediction_error,
+        integrated_residual,
+    )
 
 
 def test_sizes(n: int) -> dict:
@@ -622,6 +664,79 @@ class LoopResult:
         }
 
 
+# The loop's name for the linear output-error model (`_oe`) as a candidate in place of
+# the cascade, and in its reports.
+LINEAR_FLOOR = "linear_floor"
+# The linear model is scored by the loop's programs (as a start of the declared fit, a
+# candidate, the floor under the final model) only where its host-side validation error
+# (`_oe.validation_error`, from rest) is below this factor times the current model's:
+# elsewhere it cannot be the better model, and costs no program.
+FLOOR_MARGIN = 1.05
+
+
+@dataclasses.dataclass(frozen=True)
+class Floor:
+    """The loop's linear floor: the output-error model (`_oe.OE`), its host-side
+    validation error (from rest), and its cascade form (`ExtendedModel`: one input
+    segment a side of equal slopes, no backlash gap, an output offset)."""
+
+    oe: OE
+    host_error: float
+    model: ExtendedModel
+
+    @property
+    def label(self) -> str:
+        nb, nf = self.oe.orders
+        return f"{LINEAR_FLOOR}:OE({nb},{nf})"
+
+
+def floor_model(oe: OE, dtype=None) -> ExtendedModel:
+    """The output-error model `oe` as an `ExtendedModel`: the cascade of orders
+    `(1, 1, nb, nf)` of `_oe.cascade_vector` plus its offset (`OutputOffset`)."""
+    dtype = dtype or jnp.result_type(float)
+    orders = Orders(1, 1, *oe.orders)
+    vector = np.asarray(cascade_vector(oe, orders), dtype)
+    params = jax.tree_util.tree_map(
+        jax.device_put, CascadeParams.from_vector(vector, orders, check=False)
+    )
+    offset = OutputOffset(jax.device_put(np.asarray(oe.c, dtype)))
+    return ExtendedModel(params, (offset,), ARNoise.white(dtype))
+
+
+def _floor(us, ys, u_vals, y_vals, init_samples, integrating) -> Floor | None:
+    """The linear floor of a loop's records (`_oe.linear_floor`), or None where no stable
+    output-error model fits them or none has the cascade's form (no gain at lag 1)."""
+    try:
+        oe, error = linear_floor(
+            [np.asarray(u, float) for u in us],
+            [np.asarray(y, float) for y in ys],
+            [np.asarray(u, float) for u in u_vals],
+            [np.asarray(y, float) for y in y_vals],
+            skip=int(init_samples),
+            integrating=integrating,
+        )
+    except (ValueError, np.linalg.LinAlgError):
+        return None
+    if cascade_vector(oe, Orders(1, 1, *oe.orders)) is None:
+        return None
+    return Floor(oe, float(error), floor_model(oe, np.asarray(us[0]).dtype))
+
+
+def _host_error(model: ExtendedModel, u_vals, y_vals, init_samples, integrating) -> float:
+    """`model`'s free-run validation NRMSE from rest, the first `init_samples` of each
+    record left out (as `_oe.validation_error` scores the linear floor)."""
+    sims, meas = [], []
+    n = int(init_samples)
+    for u, y in zip(u_vals, y_vals, strict=True):
+        s, y = simulated_output(model, u), np.asarray(y, float)
+        if integrating:
+            s, y = np.cumsum(s), np.cumsum(y)
+        sims.append(s[n:])
+        meas.append(y[n:])
+    s, y = np.concatenate(sims), np.concatenate(meas)
+    return float(np.sqrt(np.mean((s - y) ** 2)) / (np.std(y) + 1e-300))
+
+
 def _grouped(loop):
     """`loop` with the groups of the effects it may try in force (`_effects._choice`):
     members of one group are fitted and scored by one program; and its records'
@@ -643,6 +758,7 @@ def _grouped(loop):
         with (
             grouping([EFFECTS[name] for name in names if name in EFFECTS], EFFECTS.values()),
             padded_to(lengths),
+            integrated_fits(bool(given.get("integrating", False))),
         ):
             return loop(*args, effects=effects, **kwargs)
 
@@ -756,8 +872,14 @@ def model_error_loop(
     y_val_np = [np.asarray(y, float) for _, y in checked]
     if not several:
         u_val_np, y_val_np = u_val_np[0], y_val_np[0]
-    # the scored samples of every validation record, joined (the pooled NRMSE's scale)
-    scored_val = np.concatenate([y[int(init_samples) :] for _, y in checked])
+    # the scored samples of every validation record, joined (the pooled NRMSE's scale;
+    # of the output integrated back where the outputs are differences)
+    scored_val = np.concatenate(
+        [
+            np.cumsum(y[int(init_samples) :]) if integrating else y[int(init_samples) :]
+            for _, y in checked
+        ]
+    )
 
     def assess(model):
         return evaluate(model, u_val_np, y_val_np, sample_period, window, init_samples, integrating)
@@ -808,6 +930,22 @@ def model_error_loop(
         if len(us) > 1 or moved:
             say("refining it on every estimation record")
             base = refit(plain(base), _no_effect(base), us, ys)[0].params
+    # The linear floor (`_oe`): the output-error model of the orders the validation
+    # records support, host side.
+    floor = _floor(us, ys, *_records(u_val_np, y_val_np), init_samples, integrating)
+    if floor is not None:
+        say(f"linear floor: {floor.label}, validation NRMSE from rest {floor.host_error:.4g}")
+    if stored is None and floor is not None:
+        # the linear model as a start of the declared fit, where it fits inside the
+        # declared orders and is the better model on the validation records
+        vector = cascade_vector(floor.oe, orders, base.to_dict())
+        declared = _host_error(plain(base), *_records(u_val_np, y_val_np), init_samples, integrating)
+        if vector is not None and floor.host_error < FLOOR_MARGIN * declared:
+            say("refining the declared cascade from the linear floor as well")
+            start = Start(
+                "declared", orders, np.stack([np.asarray(base.to_vector()), vector]), Effect()
+            )
+            base = refit(plain(base), start, us, ys)[0].params
     if stored is None:
         store.save("declared", {"params": params_to_dict(base)})
     model = plain(base)
@@ -843,6 +981,8 @@ def model_error_loop(
         ]
         if not model.cascade:  # no cascade left whose orders a structural effect changes
             tried = [n for n in tried if n not in STRUCTURAL]
+        if not integrating:  # friction on a velocity: only where the output is one
+            tried = [n for n in tried if not getattr(EFFECTS[n], "integrating_only", False)]
         # A hysteresis path may also replace the cascade (the declared structure may be
         # the wrong one, not only incomplete): tried where it would be added.
         replacing = [n for n in tried if model.cascade and n in REPLACEMENTS]
@@ -920,6 +1060,20 @@ def model_error_loop(
                     f"  {c.label:<24} error {c.error:.4g}  t {c.t:7.2f}  "
                     f"{'significant' if c.significant else ''}"
                 )
+        # the linear floor in place of the current model, where it may be the better one
+        if (
+            floor is not None
+            and model is not floor.model
+            and floor.host_error < FLOOR_MARGIN * current.error
+        ):
+            c = _score_candidate(
+                LINEAR_FLOOR, floor.label, floor.model, *fit_against, **judged_by, action="replace"
+            )
+            round_candidates.append(c)
+            say(
+                f"  {c.label:<24} error {c.error:.4g}  t {c.t:7.2f}  "
+                f"{'significant' if c.significant else ''}"
+            )
         candidates += round_candidates
         store.at("round", round=round_)
         deterministic = [c for c in round_candidates if c.significant and c.name != ARNoise.name]
@@ -955,6 +1109,23 @@ def model_error_loop(
         # The round's candidates compiled programs of their own structures (each
         # stays mapped in memory until released): freed past the bound.
         bound()
+    # never worse on the validation records than the linear floor
+    if (
+        floor is not None
+        and model is not floor.model
+        and floor.host_error < FLOOR_MARGIN * current.error
+    ):
+        floor_evaluation = assess(floor.model)
+        if floor_evaluation.error < current.error:
+            say(
+                f"the final model (error {current.error:.4g}) is worse on the validation "
+                f"records than the linear floor {floor.label} ({floor_evaluation.error:.4g}): "
+                "the linear model replaces it"
+            )
+            added.append(LINEAR_FLOOR)
+            actions.append({"effect": LINEAR_FLOOR, "action": "floor", "round": None})
+            model, current = floor.model, floor_evaluation
+            steps.append((f"replaced by the {floor.label}", model, current))
     stored = store.load("standard-errors")
     if stored is None:
         store.at("standard_errors")
@@ -1174,16 +1345,27 @@ def _score_candidate(
     a loaded fit again, `_loop_checkpoint`)."""
     t_threshold, min_gain = options.get("t_threshold", 3.0), options.get("min_gain", 0.02)
     action = options.get("action", "add")
-    effect = EFFECTS[name]
+    # the linear floor has no signature of its own: it stands for every test
+    signature = set(failed) if name == LINEAR_FLOOR else set(EFFECTS[name].signature)
     evaluation = assess(fitted)
     # The evidence of every record: the validation record out of sample and the
     # estimation records in sample, each a squared NRMSE difference (module docstring).
-    validation = diebold_mariano(current.residual, evaluation.residual, "simulation")
     in_sample = [np.asarray(y) - simulated_output(fitted, u) for u, y in zip(us, ys, strict=True)]
+    current_sample = [r[2] for r in records]
+    scales = [float(np.var(r[1])) for r in records]
+    current_residual, new_residual = current.residual, evaluation.residual
+    if current.integrated_residual is not None and evaluation.integrated_residual is not None:
+        # an output integrated back (`_integrating`): the errors of the measured output
+        # itself, which the fits minimise and the error scores (`_errors`, `evaluate`)
+        current_residual, new_residual = current.integrated_residual, evaluation.integrated_residual
+        in_sample = [np.cumsum(e) for e in in_sample]
+        current_sample = [np.cumsum(e) for e in current_sample]
+        scales = [float(np.var(np.cumsum(r[1]))) for r in records]
+    validation = diebold_mariano(current_residual, new_residual, "simulation")
     comparison = diebold_mariano_records(
-        [current.residual, *(r[2] for r in records)],
-        [evaluation.residual, *in_sample],
-        [options.get("validation_scale", 1.0), *(float(np.var(r[1])) for r in records)],
+        [current_residual, *current_sample],
+        [new_residual, *in_sample],
+        [options.get("validation_scale", 1.0), *scales],
         "simulation",
     )
     gain = 1 - evaluation.error / current.error
@@ -1194,7 +1376,7 @@ def _score_candidate(
         evaluation.error,
         comparison.statistic,
         bool(comparison.statistic > t_threshold and gain > min_gain),
-        bool(failed & set(effect.signature)),
+        bool(failed & signature),
         fitted,
         evaluation,
         comparison,

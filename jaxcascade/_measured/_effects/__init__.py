@@ -1,6 +1,7 @@
 """The effect library and its registry (`_base`: the interface and the cascade's
 structural and output effects; `_hysteresis`: friction and hysteresis paths; `_curved`:
-the curved output backlash).
+the curved output backlash; `_feedback`: terms inside the linear block's recursion
+(`_recursion`); `_wiener`: a static map and dynamics after the cascade).
 
 To add an effect: its class in a module here, and its entry in `EFFECTS`."""
 
@@ -76,6 +77,24 @@ from ._choice import (
 from ._curved import (
     CurvedBacklash as CurvedBacklash,
 )
+from ._feedback import (
+    DirectTerm as DirectTerm,
+)
+from ._feedback import (
+    NonlinearFeedback as NonlinearFeedback,
+)
+from ._feedback import (
+    VelocityFriction as VelocityFriction,
+)
+from ._wiener import (
+    OutputDynamics as OutputDynamics,
+)
+from ._wiener import (
+    OutputFold as OutputFold,
+)
+from ._wiener import (
+    OutputPolynomial as OutputPolynomial,
+)
 from ._hysteresis import (
     BacklashFriction as BacklashFriction,
 )
@@ -112,6 +131,12 @@ EFFECTS: dict[str, type[Effect]] = {
         DahlFriction,
         InputBacklash,
         CurvedBacklash,
+        NonlinearFeedback,
+        DirectTerm,
+        VelocityFriction,
+        OutputPolynomial,
+        OutputFold,
+        OutputDynamics,
     )
 }
 # tried only when a test of their signature failed: the hysteresis paths and the curved

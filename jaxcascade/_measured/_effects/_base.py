@@ -34,8 +34,9 @@ from jaxtyping import Array, Float
 from ..._compile import bucket_length, exported, pad
 from ..._system._general_backlash import GeneralBacklash, general_signals
 from ..._system._model import CascadeParams, Orders
-from ..._system._simulate import signals
+from ..._system._simulate import backlash, general_backlash, pwl, signals
 from .._noise import ARNoise
+from ._recursion import linear_with_terms
 
 
 class Effect(eqx.Module):
@@ -66,6 +67,13 @@ class Effect(eqx.Module):
     def parallel(self, u):
         """A path in parallel with the cascade: its output, added to the model's output,
         from the model's input `u`; `None` (the default) for an effect without one."""
+        return None
+
+    def recursion(self, v, x_prev):
+        """A term added to the linear block's output `x(t)` inside its recursion, from
+        the block's input `v(t)` and its output `x(t-1)` (scalars of one sample): a
+        feedback of the output into the dynamics (`_recursion`, `_feedback`); `None`
+        (the default) for an effect that leaves the recursion alone."""
         return None
 
     # The effect's state (`_initial_state`): the state before a record's first sample
@@ -197,16 +205,21 @@ class ExtendedModel(eqx.Module):
 
     def structure(self) -> str:
         """The model's structure as one line, e.g.
-        `u -> input_delay -> pwl -> linear -> backlash -> + output_offset -> y`."""
+        `u -> input_delay -> pwl -> linear -> backlash -> + output_offset -> y`; effects
+        inside the linear block's recursion as `linear(r,p) with nonlinear_feedback`."""
         inputs = [e.name for e in self.effects if type(e).input is not Effect.input]
         outputs = [e.name for e in self.effects if type(e).output is not Effect.output]
         paths = [e.name for e in self.effects if type(e).parallel is not Effect.parallel]
+        inside = [e.name for e in self.effects if type(e).recursion is not Effect.recursion]
         chain = ["u", *inputs]
         if self.cascade:
             o = self.orders
             nd = backlash_of(self)
             block = "backlash" if nd is None else f"general_backlash({nd.degree})"
-            chain += [f"pwl({o.nR},{o.nL})", f"linear({o.r},{o.p})", block]
+            linear = f"linear({o.r},{o.p})"
+            if inside:  # terms inside the linear block's recursion (`_recursion`)
+                linear = f"{linear} with {' and '.join(inside)}"
+            chain += [f"pwl({o.nR},{o.nL})", linear, block]
             line = " -> ".join(chain)
             if paths:
                 line = f"{line} (+ {' + '.join(f'{p}(u)' for p in paths)})"
@@ -247,6 +260,11 @@ def simulate_extended(model: ExtendedModel, u):
     return simulate_with_switches(model, u)[0]
 
 
+def recursion_terms(model: ExtendedModel) -> list:
+    """The `Effect.recursion` terms of `model`'s effects that have one, in order."""
+    return [e.recursion for e in model.effects if type(e).recursion is not Effect.recursion]
+
+
 def simulate_with_switches(model: ExtendedModel, u):
     """Simulated output and the backlash regime signals `(y, x, y_cascade)`. Without the
     cascade (`ExtendedModel.cascade` False) `x` is the input after the input effects and
@@ -254,7 +272,12 @@ def simulate_with_switches(model: ExtendedModel, u):
     u_model = u
     for effect in model.effects:
         u = effect.input(u)
-    if model.cascade:
+    terms = recursion_terms(model)
+    if model.cascade and terms:  # a feedback inside the linear block (`_recursion`)
+        nd = backlash_of(model)
+        x = linear_with_terms(model.params, pwl(model.params, u), terms)
+        y = backlash(model.params, x) if nd is None else general_backlash(nd, x)
+    elif model.cascade:
         nd = backlash_of(model)
         inner = signals(model.params, u) if nd is None else general_signals(model.params, nd, u)
         x, y = inner.x, inner.y

@@ -67,10 +67,14 @@ def _fields(kind) -> tuple[tuple[str, ...], tuple[str, ...]]:
 
 def eligible(kind) -> bool:
     """Whether `kind` can be a member of a group: at least one field and every field a
-    scalar parameter, and the cascade's straight backlash left alone."""
+    scalar parameter, and the cascade's straight backlash and its linear block's
+    recursion left alone (a `Choice` switches the stages, not those)."""
     fields = dataclasses.fields(kind)
     return (
-        bool(fields) and all(_scalar(f.type) for f in fields) and kind.backlash is Effect.backlash
+        bool(fields)
+        and all(_scalar(f.type) for f in fields)
+        and kind.backlash is Effect.backlash
+        and kind.recursion is Effect.recursion
     )
 
 

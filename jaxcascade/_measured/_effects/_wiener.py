@@ -1,0 +1,187 @@
+"""A static map and dynamics after the cascade: the Wiener and Wiener-Hammerstein forms.
+
+The cascade ends with its backlash; real devices often end with a static nonlinearity of
+the sensor or the output stage, and with dynamics after it:
+
+    u -> [pwl -> linear -> backlash] -> static map -> output dynamics -> y
+
+- `OutputPolynomial` (`output_polynomial`): `y + c0 + c2 y^2 + c3 y^3`, a smooth static
+  map of the output (a saturating amplifier, a square-root law around its operating
+  point, a diode): with the linear block, a Wiener system.
+- `OutputFold` (`output_fold`): `c0 + c1 |y - s| + c2 (y - s)^2`, the output folded at
+  the level `s`: a sensor blind to the sign (a pulse counter measuring the magnitude of
+  a speed, CED's belt drive), a rectifier, with a smooth correction. The absolute value
+  is smoothed over `EPS` (model units) so that its derivative is finite at the fold.
+- `OutputDynamics` (`output_dynamics`): a second linear block after the static part,
+  `y_out = (1 + beta_1 q^-1 + ..) / (1 + alpha_1 q^-1 + ..) y` (unit gain at high
+  frequency: the cascade holds the gain): the Wiener-Hammerstein sandwich (J. Voros has
+  published its form with an output backlash). Proposed only after a static map
+  (without one it would be the linear block's own dynamics: `dynamics_order`).
+
+Signatures: a static map of the output leaves an error that is a nonlinear function of
+past inputs (`u2_e`, `u2_e2`, `e_eu`) and of the level (`level`, `mean`); dynamics after
+it leave a coloured error correlated with the input (`autocorrelation`,
+`cross_correlation`, `spectrum`). Starts: the polynomial's coefficients regressed on the
+current output's powers, the fold at the lower quantiles of the current output (where a
+sign-blind output touches zero), the dynamics at the identity.
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from ..._system._simulate import _poles_blocked, _poles_scan
+from ._base import Effect, EffectState, Start, _batched, _repeat, recent, simulate_padded
+
+
+def _outputs(model, records):
+    """The current model's outputs on every record `(u, y, residual)`, joined."""
+    return np.concatenate([simulate_padded(model, np.asarray(u, float))[0] for u, _, _ in records])
+
+
+def _static(model) -> bool:
+    """Whether `model` has a static map after the cascade (`OutputPolynomial`,
+    `OutputFold`)."""
+    return any(isinstance(e, OutputPolynomial | OutputFold) for e in model.effects)
+
+
+class OutputPolynomial(Effect):
+    name: ClassVar[str] = "output_polynomial"
+    signature: ClassVar[tuple[str, ...]] = ("u2_e", "u2_e2", "e_eu", "level")
+    description: ClassVar[str] = (
+        "static polynomial map of the output: y + c0 + c2 y^2 + c3 y^3 (a Wiener "
+        "structure: a saturating or square-law sensor or output stage)"
+    )
+    needs_signature: ClassVar[bool] = True
+
+    coefficients: Float[Array, " 3"]  # c0, c2, c3
+
+    def output(self, y, x):
+        c = self.coefficients.astype(y.dtype)
+        return y + c[0] + y * y * (c[1] + c[2] * y)
+
+    @classmethod
+    def starts_records(cls, model, records):
+        if _static(model):
+            return []
+        y = _outputs(model, records)
+        r = np.concatenate([np.asarray(res, float) for _, _, res in records])
+        X = np.stack([np.ones_like(y), y**2, y**3], axis=1)
+        if not np.all(np.isfinite(X)) or X.shape[0] < 30:
+            return []
+        scale = np.sqrt(np.mean(X**2, axis=0)) + 1e-300
+        fit = np.linalg.lstsq(X / scale, r, rcond=None)[0] / scale
+        values = np.array([fit, 0.5 * fit, np.zeros(3)])
+        effect = _batched(cls, coefficients=values)
+        return [Start(cls.name, model.orders, _repeat(model, len(values)), effect)]
+
+    @classmethod
+    def starts(cls, model, u, y, residual):
+        return cls.starts_records(model, [(u, y, residual)])
+
+
+class OutputFold(Effect):
+    name: ClassVar[str] = "output_fold"
+    signature: ClassVar[tuple[str, ...]] = ("u2_e", "u2_e2", "e_eu", "level", "mean")
+    description: ClassVar[str] = (
+        "output folded at a level: c0 + c1 |y - s| + c2 (y - s)^2 (a sign-blind sensor, "
+        "|speed|; a rectifier)"
+    )
+    needs_signature: ClassVar[bool] = True
+    # the fold's smoothing, in model units (the records' standard deviation is about one)
+    EPS: ClassVar[float] = 1e-3
+    quantiles: ClassVar[tuple[float, ...]] = (0.0, 0.05, 0.2)
+
+    coefficients: Float[Array, " 4"]  # c0, c1, c2, s
+
+    def output(self, y, x):
+        c = self.coefficients.astype(y.dtype)
+        d = y - c[3]
+        return c[0] + c[1] * jnp.sqrt(d * d + self.EPS**2) + c[2] * d * d
+
+    @classmethod
+    def starts_records(cls, model, records):
+        if _static(model):
+            return []
+        y = _outputs(model, records)
+        if not np.all(np.isfinite(y)):
+            return []
+        # a fold just below each quantile of the current output: there the map starts
+        # as the identity (|y - s| = y - s above the fold), and the refit moves the
+        # cascade's output across it where the measured output turns back
+        levels = np.quantile(y, cls.quantiles) - 0.05 * np.std(y)
+        values = np.array([[s, 1.0, 0.0, s] for s in levels])
+        effect = _batched(cls, coefficients=values)
+        return [Start(cls.name, model.orders, _repeat(model, len(values)), effect)]
+
+    @classmethod
+    def starts(cls, model, u, y, residual):
+        return cls.starts_records(model, [(u, y, residual)])
+
+
+class OutputDynamics(Effect):
+    name: ClassVar[str] = "output_dynamics"
+    signature: ClassVar[tuple[str, ...]] = ("autocorrelation", "cross_correlation", "spectrum")
+    description: ClassVar[str] = (
+        "linear dynamics after the static output map: (1 + beta q^-1 ..) / (1 + alpha "
+        "q^-1 ..) (a Wiener-Hammerstein sandwich)"
+    )
+    needs_signature: ClassVar[bool] = True
+    orders: ClassVar[tuple[int, ...]] = (1, 2)
+
+    zeros: Float[Array, " m"]  # beta_1 .. beta_m
+    poles: Float[Array, " n"]  # alpha_1 .. alpha_n
+
+    def _filter(self, y, y_past, out_past):
+        """The filter's output on `y`, continued from the past inputs `y_past` and
+        outputs `out_past` (newest first)."""
+        beta = self.zeros.astype(y.dtype)
+        alpha = self.poles.astype(y.dtype)
+        m, n, T = beta.shape[0], alpha.shape[0], y.shape[0]
+        joined = jnp.concatenate([y_past[::-1].astype(y.dtype), y])
+        w = y + sum(beta[i - 1] * joined[m - i : m - i + T] for i in range(1, m + 1))
+        # the past outputs enter as a forcing of the first n samples
+        for t in range(min(n, T)):
+            w = w.at[t].add(-sum(alpha[j - 1] * out_past[j - t - 1] for j in range(t + 1, n + 1)))
+        return _poles_scan(alpha, w) if T <= 64 else _poles_blocked(alpha, w, 64)
+
+    def output(self, y, x):
+        m, n = self.zeros.shape[-1], self.poles.shape[-1]
+        return self._filter(y, jnp.zeros((m,), y.dtype), jnp.zeros((n,), y.dtype))
+
+    def rest_state(self, u):
+        m, n = self.zeros.shape[-1], self.poles.shape[-1]
+        return EffectState(jnp.zeros((m + n,), u.dtype), jnp.zeros((0,), u.dtype))
+
+    def output_with_state(self, y, x, state, at):
+        m = self.zeros.shape[-1]
+        y_past, out_past = state.free[:m], state.free[m:]
+        out = self._filter(y, y_past, out_past)
+        free = jnp.concatenate([recent(y_past, y, at), recent(out_past, out, at)])
+        return out, EffectState(free, state.known)
+
+    @classmethod
+    def starts_records(cls, model, records):
+        if not _static(model) or any(isinstance(e, cls) for e in model.effects):
+            return []
+        starts = []
+        for k in cls.orders:
+            # the identity, and a slow and a fast real pole with a zero beside it
+            values = {
+                "zeros": np.array([np.zeros(k), np.full(k, -0.2), np.full(k, 0.2)]),
+                "poles": np.array([np.zeros(k), np.full(k, -0.5), np.full(k, 0.2)]),
+            }
+            if k == 2:  # a stable pair: 1 - 0.5 q^-1 + 0.0625 q^-2 has its roots at 0.25
+                values["poles"][1:] = [[-0.5, 0.0625], [0.3, 0.02]]
+            effect = _batched(cls, **values)
+            starts.append(Start(f"{cls.name}:{k}", model.orders, _repeat(model, 3), effect))
+        return starts
+
+    @classmethod
+    def starts(cls, model, u, y, residual):
+        return cls.starts_records(model, [(u, y, residual)])
