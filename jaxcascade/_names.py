@@ -15,32 +15,70 @@ ESTIMATORS = {
     "recursive": "the key-term regression (eqs. 16-18) by recursive least squares with forgetting",
 }
 
-# the effect library of the model-error loop, in the registry's order
-EFFECTS = (
-    "output_offset",
-    "input_delay",
-    "dynamics_order",
-    "pwl_segment",
-    "output_saturation",
-    "output_drift",
-    "output_feedthrough",
-    "slack_friction",
-    "backlash_friction",
-    "backlash_friction_contacts",
-    "prandtl_ishlinskii",
-    "dahl_friction",
-    "input_backlash",
-    "general_backlash",
-    "nonlinear_feedback",
-    "direct_term",
-    "velocity_friction",
-    "output_polynomial",
-    "output_fold",
-    "output_dynamics",
-)
+# the effect library of the model-error loop, in the registry's order: name: one-line
+# description (`Effect.description`)
+EFFECTS = {
+    "output_offset": "constant offset added to the output: y + d",
+    "input_delay": "pure input delay of d samples: u(t - d)",
+    "dynamics_order": "one more pole (p + 1) or zero (r + 1) in the linear block",
+    "pwl_segment": "one more breakpoint (segment) in the static input nonlinearity",
+    "output_saturation": "output clipped to [lower, upper] (a sensor or actuator limit)",
+    "output_drift": "linear drift of the output over the record: y + d t / 1000 (t in samples)",
+    "output_feedthrough": "parallel linear path from x to the output: y + d x",
+    "slack_friction": (
+        "friction behind a slack zone: stop operator (threshold r) then a dead zone (|s| "
+        "<= dead r) and plateaus upper, lower"
+    ),
+    "backlash_friction": (
+        "Coulomb friction (levels upper, lower) behind a slack (half-width gap) through a"
+        " contact of stiffness k, averaged over the rotor's unknown start in the slack"
+    ),
+    "backlash_friction_contacts": (
+        "backlash_friction with the rotor starting at rest against either side of the "
+        "slack (mean of the two)"
+    ),
+    "prandtl_ishlinskii": (
+        "Prandtl-Ishlinskii sum of stop operators (thresholds on a grid, fixed) and "
+        "hinges of each, linear in the weights"
+    ),
+    "dahl_friction": (
+        "Dahl friction: dF = sigma du (1 - F/level sgn du), in parallel with the cascade"
+    ),
+    "input_backlash": (
+        "backlash (play operator, half-width gap) in front of the static nonlinearity"
+    ),
+    "general_backlash": (
+        "curved branches of the output backlash (general backlash, polynomial degree 2-3)"
+    ),
+    "nonlinear_feedback": (
+        "polynomial of the linear block's past output fed back into it: x(t) + k2 "
+        "x(t-1)^2 + k3 x(t-1)^3 (a Duffing spring, a Lur'e loop)"
+    ),
+    "direct_term": (
+        "the input acting within the sample: x(t) + d v(t) (a zero at lag 0 of sampled "
+        "continuous dynamics)"
+    ),
+    "velocity_friction": (
+        "Coulomb friction on the velocity of an integrating plant: x(t) - f+ s+ - f- s-, "
+        "s = tanh(x(t-1) / eps) (positioning systems; with --integrate)"
+    ),
+    "output_polynomial": (
+        "static polynomial map of the output: y + c0 + c2 y^2 + c3 y^3 (a Wiener "
+        "structure: a saturating or square-law sensor or output stage)"
+    ),
+    "output_fold": (
+        "output folded at a level: c0 + c1 |y - s| + c2 (y - s)^2 (a sign-blind sensor, "
+        "|speed|; a rectifier)"
+    ),
+    "output_dynamics": (
+        "linear dynamics after the static output map: (1 + beta q^-1 ..) / (1 + alpha "
+        "q^-1 ..) (a Wiener-Hammerstein sandwich)"
+    ),
+}
 
-# the loop's noise model, considered beside the effects
+# the loop's noise model, considered beside the effects, and its description
 NOISE_MODEL = "colored_noise"
+NOISE_MODEL_DESCRIPTION = "autoregressive output noise e(t) = w(t) + c1 e(t-1) + ... + cq e(t-q)"
 
 # input designs of a sweep: name: one-line summary (`InputDesign.summary`)
 INPUTS = {

@@ -19,8 +19,9 @@ LOOP_PAGE = pathlib.Path(__file__).parents[1] / "docs" / "loop.md"
 def test_names_equal_the_registries():
     # the package's own (a user's registered estimators join `ESTIMATORS` at run time)
     assert _names.ESTIMATORS == {name: ESTIMATORS[name].summary for name in BUILTIN}
-    assert _names.EFFECTS == tuple(EFFECTS)
+    assert _names.EFFECTS == {name: effect.description for name, effect in EFFECTS.items()}
     assert _names.NOISE_MODEL == ARNoise.name
+    assert _names.NOISE_MODEL_DESCRIPTION == ARNoise.description
     assert _names.FAMILIES == tuple(FAMILIES)
     assert _names.BENCH_SYSTEMS == tuple(SYSTEMS)
     assert _names.INPUTS == {name: cls.summary for name, cls in INPUTS.items()}

@@ -19,12 +19,13 @@ import dataclasses
 import pathlib
 import sys
 
-from .._names import EFFECTS, NOISE_MODEL
+from .._names import EFFECTS, NOISE_MODEL, NOISE_MODEL_DESCRIPTION
 from ._common import (
     RECORD_SPEC,
     CLIError,
     add_record_arguments,
     examples,
+    kind_help,
     parse_orders,
     strict_json,
     writable_folder,
@@ -1150,7 +1151,7 @@ def add_parser(subparsers) -> None:
         "--effects",
         default=None,
         help="NAME,NAME: the effects of the library the loop considers (default: all): "
-        f"{', '.join([*EFFECTS, NOISE_MODEL])}",
+        + kind_help({**EFFECTS, NOISE_MODEL: NOISE_MODEL_DESCRIPTION}),
     )
     parser.add_argument(
         "--test",

@@ -606,6 +606,8 @@ class LoopResult:
     programs_compiled: int = 0
     # what each round did: `{"effect", "action" ("add" or "replace"), "round"}`
     actions: list[dict] = dataclasses.field(default_factory=list)
+    # the linear output-error model of the loop's records (`Floor`), or None
+    floor: Floor | None = None
 
     def to_dict(self) -> dict:
         def params(model):
@@ -661,6 +663,16 @@ class LoopResult:
             "model_after": params(self.final),
             "standard_errors_after": dict(self.standard_errors),
             "programs_compiled": self.programs_compiled,
+            "linear_floor": None
+            if self.floor is None
+            else {
+                "model": self.floor.label,
+                "orders": {"nb": self.floor.oe.orders[0], "nf": self.floor.oe.orders[1]},
+                "b": np.asarray(self.floor.oe.b).tolist(),
+                "f": np.asarray(self.floor.oe.f).tolist(),
+                "offset": float(self.floor.oe.c),
+                "validation_error_from_rest": self.floor.host_error,
+            },
         }
 
 
@@ -927,7 +939,9 @@ def model_error_loop(
                 f"breakpoint(s) {', '.join(moved)} had fewer than {MIN_BEYOND} input samples "
                 "(or 1 %) beyond them: moved inside, segment refitted"
             )
-        if len(us) > 1 or moved:
+        if len(us) > 1 or moved or integrating:
+            # (an integrating loop's refits fit the output integrated back, `_errors`:
+            # the declared cascade too, so that a candidate's gain is its effect's)
             say("refining it on every estimation record")
             base = refit(plain(base), _no_effect(base), us, ys)[0].params
     # The linear floor (`_oe`): the output-error model of the orders the validation
@@ -939,7 +953,9 @@ def model_error_loop(
         # the linear model as a start of the declared fit, where it fits inside the
         # declared orders and is the better model on the validation records
         vector = cascade_vector(floor.oe, orders, base.to_dict())
-        declared = _host_error(plain(base), *_records(u_val_np, y_val_np), init_samples, integrating)
+        declared = _host_error(
+            plain(base), *_records(u_val_np, y_val_np), init_samples, integrating
+        )
         if vector is not None and floor.host_error < FLOOR_MARGIN * declared:
             say("refining the declared cascade from the linear floor as well")
             start = Start(
@@ -1148,6 +1164,7 @@ def model_error_loop(
         errors,
         compile_count() - compiled_before,
         actions,
+        floor,
     )
 
 

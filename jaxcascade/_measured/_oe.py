@@ -69,7 +69,7 @@ def _stabilised(f: np.ndarray) -> np.ndarray:
     return np.real(np.poly(roots))[1:]
 
 
-def _residuals_and_jacobian(theta, nb, nf, records):
+def _residuals_and_jacobian(theta, nb, nf, records, integrated=False):
     b, f, c = theta[:nb], theta[nb : nb + nf], theta[-1]
     den = np.concatenate([[1.0], f])
     num = np.concatenate([[0.0], b])
@@ -81,20 +81,27 @@ def _residuals_and_jacobian(theta, nb, nf, records):
         columns = [np.concatenate([np.zeros(j), uf[:-j]]) for j in range(1, nb + 1)]
         columns += [-np.concatenate([np.zeros(i), xf[:-i]]) for i in range(1, nf + 1)]
         columns.append(np.ones_like(u))
-        rows.append(x + c - y)
-        jac.append(np.stack(columns, axis=1))
+        residual, columns = x + c - y, np.stack(columns, axis=1)
+        if integrated:  # the errors of the output integrated back, from the record's start
+            residual, columns = np.cumsum(residual), np.cumsum(columns, axis=0)
+        rows.append(residual)
+        jac.append(columns)
     return np.concatenate(rows), np.concatenate(jac)
 
 
-def fit_oe(us, ys, nb: int, nf: int) -> OE:
+def fit_oe(us, ys, nb: int, nf: int, integrated: bool = False) -> OE:
     """The output-error model of orders `(nb, nf)` on the records `us`, `ys` (sequences of
-    1-D arrays, each simulated from rest), from the ARX fit on them joined."""
+    1-D arrays, each simulated from rest), from the ARX fit on them joined. `integrated`:
+    the outputs are differences of a measured output (`_integrating`), and the fit
+    minimises the error of the output integrated back, as the loop's refits do."""
     records = [(np.asarray(u, float), np.asarray(y, float)) for u, y in zip(us, ys, strict=True)]
-    arx = fit_arx(np.concatenate([r[0] for r in records]), np.concatenate([r[1] for r in records]), nf, nb)
+    arx = fit_arx(
+        np.concatenate([r[0] for r in records]), np.concatenate([r[1] for r in records]), nf, nb
+    )
     theta = np.concatenate([arx.b, _stabilised(arx.a), [0.0]])
     # the offset of the ARX fit, as an output offset: c / A(1)
     theta[-1] = arx.c / max(1e-6, abs(1 + np.sum(arx.a))) * np.sign(1 + np.sum(arx.a))
-    residual, J = _residuals_and_jacobian(theta, nb, nf, records)
+    residual, J = _residuals_and_jacobian(theta, nb, nf, records, integrated)
     cost, damping = float(residual @ residual), 1e-3
     for _ in range(_MAX_STEPS):
         g, H = J.T @ residual, J.T @ J
@@ -105,7 +112,7 @@ def fit_oe(us, ys, nb: int, nf: int) -> OE:
             step = -np.linalg.solve(Hs + damping * np.eye(len(theta)), g / scale) / scale
             trial = theta + step
             trial[nb : nb + nf] = _stabilised(trial[nb : nb + nf])
-            r_trial, J_trial = _residuals_and_jacobian(trial, nb, nf, records)
+            r_trial, J_trial = _residuals_and_jacobian(trial, nb, nf, records, integrated)
             c_trial = float(r_trial @ r_trial)
             if np.isfinite(c_trial) and c_trial < cost:
                 decrease = (cost - c_trial) / max(cost, 1e-300)
@@ -135,14 +142,16 @@ def validation_error(model: OE, u_vals, y_vals, skip: int = 0, integrating: bool
     return float(np.sqrt(np.mean((s - y) ** 2)) / (np.std(y) + 1e-300))
 
 
-def linear_floor(us, ys, u_vals, y_vals, *, skip: int = 0, integrating: bool = False, max_order: int = MAX_ORDER):
+def linear_floor(
+    us, ys, u_vals, y_vals, *, skip: int = 0, integrating: bool = False, max_order: int = MAX_ORDER
+):
     """The output-error model whose orders `(nb, nf)`, up to `max_order` each, give the
     lowest free-run validation error (`validation_error`), with that error: `(OE,
     error)`. Among orders within 0.1 % of the lowest error the fewest parameters win."""
     fits = []
     for nf in range(1, max_order + 1):
         for nb in range(1, max_order + 1):
-            model = fit_oe(us, ys, nb, nf)
+            model = fit_oe(us, ys, nb, nf, integrating)
             if not model.largest_pole < 1:
                 continue
             error = validation_error(model, u_vals, y_vals, skip, integrating)

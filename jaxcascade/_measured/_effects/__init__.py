@@ -86,15 +86,6 @@ from ._feedback import (
 from ._feedback import (
     VelocityFriction as VelocityFriction,
 )
-from ._wiener import (
-    OutputDynamics as OutputDynamics,
-)
-from ._wiener import (
-    OutputFold as OutputFold,
-)
-from ._wiener import (
-    OutputPolynomial as OutputPolynomial,
-)
 from ._hysteresis import (
     BacklashFriction as BacklashFriction,
 )
@@ -112,6 +103,15 @@ from ._hysteresis import (
 )
 from ._hysteresis import (
     SlackFriction as SlackFriction,
+)
+from ._wiener import (
+    OutputDynamics as OutputDynamics,
+)
+from ._wiener import (
+    OutputFold as OutputFold,
+)
+from ._wiener import (
+    OutputPolynomial as OutputPolynomial,
 )
 
 EFFECTS: dict[str, type[Effect]] = {

@@ -86,9 +86,7 @@ def _applies(cls, model) -> bool:
     """An effect of the recursion needs the cascade, a pole (`x(t-1)` in its state) and
     no effect of its own kind already."""
     return (
-        model.cascade
-        and model.orders.p >= 1
-        and not any(isinstance(e, cls) for e in model.effects)
+        model.cascade and model.orders.p >= 1 and not any(isinstance(e, cls) for e in model.effects)
     )
 
 
