@@ -39,6 +39,17 @@ The definitions, and where they are documented:
   opposite sign (`DahlFriction.parallel`: "a force opposing the usual sign convention"),
   `sgn(level) dahl(u; |sigma|, |level|)`.
 - `input_backlash`: `y = cascade(play(u))`, play operator of half-width `|gap|`.
+- the terms inside the linear block's recursion (`_effects/_recursion.py`,
+  `_effects/_feedback.py`): `x(t) = sum_i a_i v(t-i) - sum_j b_j x(t-j) + term(v(t),
+  x(t-1), x(t) so far)`, the terms of every such effect added in order, `x` held within
+  `+-LIMIT` (1e6):
+  `nonlinear_feedback` `k2 x(t-1)^2 + k3 x(t-1)^3`; `direct_term` `d v(t)`;
+  `velocity_friction` `-clip(x, -|f-|, |f+|)` of the value `x(t)` has so far (the
+  linear recursion's plus the terms of the effects before it).
+- the maps after the cascade (`_effects/_wiener.py`): `output_polynomial` `y + c0 + c2
+  y^2 + c3 y^3`; `output_fold` `c0 + c1 sqrt((y - s)^2 + EPS^2) + c2 (y - s)^2`, EPS =
+  1e-3 (`FOLD_EPS`); `output_dynamics` `w(t) = y(t) + sum_i beta_i y(t-i)`, `out(t) =
+  w(t) - sum_j alpha_j out(t-j)`, from rest.
 - `general_backlash` (`_effects/_curved.py`, `docs/general_backlash.md`): the cascade's
   backlash with curved branches on its own `cL`, `mR`, `cR`:
   `fL = (x + cL) + sum_i curveL[i-2] (x + cL)^i`, `fR = mR (x - cR) + sum_i
@@ -207,7 +218,59 @@ def _input_effect(name, p, u):
     return u
 
 
+# The documented constant of the output fold, written out here (not read from the class,
+# so that a changed constant is caught).
+FOLD_EPS = 1e-3
+LIMIT = 1e6
+
+
+def _term(name, p, v_t, x_prev, x_new):
+    """One effect's term inside the linear block's recursion, or 0."""
+    if name == "nonlinear_feedback":
+        k2, k3 = p["coefficients"]
+        return k2 * x_prev**2 + k3 * x_prev**3
+    if name == "direct_term":
+        return float(np.ravel(p["gain"])[0]) * v_t
+    if name == "velocity_friction":
+        f_up, f_down = (abs(f) for f in p["forces"])
+        return -clip(x_new, -f_down, f_up)
+    return 0.0
+
+
+RECURSION = ("nonlinear_feedback", "direct_term", "velocity_friction")
+
+
+def linear_with_terms(P: dict, v, effects) -> np.ndarray:
+    """The linear block with the effects' terms inside its recursion, one sample at a
+    time, from rest."""
+    a = [1.0, *P["a"]]
+    b = list(P["b"])
+    x = np.zeros(len(v))
+    for t in range(len(v)):
+        value = sum(a[i - 1] * oracle.past(v, t - i) for i in range(1, len(a) + 1))
+        value -= sum(b[j - 1] * oracle.past(x, t - j) for j in range(1, len(b) + 1))
+        for name, p in effects:
+            value += _term(name, p, v[t], oracle.past(x, t - 1), value)
+        x[t] = clip(value, -LIMIT, LIMIT)
+    return x
+
+
 def _output_effect(name, p, y, x):
+    if name == "output_polynomial":
+        c0, c2, c3 = p["coefficients"]
+        return y + c0 + c2 * y**2 + c3 * y**3
+    if name == "output_fold":
+        c0, c1, c2, s = p["coefficients"]
+        return c0 + c1 * np.sqrt((y - s) ** 2 + FOLD_EPS**2) + c2 * (y - s) ** 2
+    if name == "output_dynamics":
+        beta, alpha = np.atleast_1d(p["zeros"]), np.atleast_1d(p["poles"])
+        out = np.zeros(len(y))
+        for t in range(len(y)):
+            w = y[t] + sum(beta[i - 1] * oracle.past(y, t - i) for i in range(1, len(beta) + 1))
+            out[t] = w - sum(
+                alpha[j - 1] * oracle.past(out, t - j) for j in range(1, len(alpha) + 1)
+            )
+        return out
     if name == "output_offset":
         return y + p["offset"]
     if name == "output_drift":
@@ -246,6 +309,10 @@ KNOWN = (
     "prandtl_ishlinskii",
     "dahl_friction",
     "general_backlash",
+    *RECURSION,
+    "output_polynomial",
+    "output_fold",
+    "output_dynamics",
     *STRUCTURAL,
 )
 
@@ -267,7 +334,12 @@ def simulate(model, u, effective: dict | None = None) -> np.ndarray:
     for name, p in effects:
         u_in = _input_effect(name, p, u_in)
     P = oracle.unpack({k: float(v) for k, v in model.params.to_dict().items()}, model.params.orders)
-    _, x, y = oracle.simulate(P, u_in)
+    terms = [(name, p) for name, p in effects if name in RECURSION]
+    if terms:
+        x = linear_with_terms(P, oracle.pwl(P, u_in), terms)
+        y = oracle.backlash(P, x)
+    else:
+        _, x, y = oracle.simulate(P, u_in)
     for name, p in effects:
         if name == "general_backlash":  # in place of the cascade's straight backlash
             curves = (np.atleast_1d(p["curveL"]), np.atleast_1d(p["curveR"]))

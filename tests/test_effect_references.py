@@ -30,6 +30,7 @@ from jaxcascade._measured._effects import (
     OutputOffset,
     PrandtlIshlinskii,
     SlackFriction,
+    VelocityFriction,
     plain,
     simulate_extended,
 )
@@ -69,6 +70,9 @@ MODELS = {
     "general_backlash": lambda: _with(
         CurvedBacklash(jnp.array([0.0, 0.04]), jnp.array([0.0, 0.05]))
     ),
+    # Coulomb friction on Example 1's x taken as a velocity (`_testing.INTEGRATING`'s
+    # forces)
+    "velocity_friction": lambda: _with(VelocityFriction(jnp.array([0.3, 0.4]))),
 }
 
 

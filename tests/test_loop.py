@@ -186,12 +186,28 @@ def test_paired_improvement_sign():
 
 
 def test_every_effect_of_the_library_has_an_undeclared_record():
-    # The hysteresis effects are tried only when the hysteresis test fails, which it
-    # does on none of these records (test_diagnose); they have tests of their own below.
+    # The hysteresis paths and the curved backlash are tried only when a test of their
+    # signature fails, which the hysteresis test does on none of these records
+    # (test_diagnose); they have tests of their own (below, test_hysteresis.py,
+    # test_curved_backlash_effect.py). Every other effect has a synthetic record: Example
+    # 1 with it (`UNDECLARED`), or the axis under control whose output integrates
+    # (`INTEGRATING`).
     from jaxcascade._measured._effects import HYSTERESIS
+    from jaxcascade._measured._testing import INTEGRATING
 
-    library = {*EFFECTS, ARNoise.name} - set(HYSTERESIS)
-    assert library == {name for name in UNDECLARED if name is not None}
+    records = {name for name in (*UNDECLARED, *INTEGRATING) if name is not None}
+    own_tests = {
+        "slack_friction",
+        "backlash_friction",
+        "backlash_friction_contacts",
+        "prandtl_ishlinskii",
+        "dahl_friction",
+        "input_backlash",
+        "general_backlash",
+    }
+    assert records | own_tests == {*EFFECTS, ARNoise.name}
+    assert not records & own_tests
+    assert own_tests <= set(HYSTERESIS)
     assert all(EFFECTS[name].needs_signature for name in HYSTERESIS)
 
 

@@ -168,7 +168,8 @@ _INTEGRATED = contextvars.ContextVar("jaxcascade_integrated_fits", default=False
 @contextlib.contextmanager
 def integrated_fits(on: bool = True):
     """Within the block every refit (`refit_all`) minimises the error of the output
-    integrated back (`_errors`), not of its difference."""
+    integrated back (`_errors`): it fits the difference first, then polishes that fit on
+    the integrated output."""
     token = _INTEGRATED.set(bool(on))
     try:
         yield
@@ -248,12 +249,17 @@ def _refit(
             effects = eqx.combine(unravel(z[size:]), fixed)
             return current.with_(params=fitted, effects=tuple(effects))
 
-        def residual(z, args):
+        def residual(z, integrate):
             # With a noise model the fit minimises the one-step prediction error (its
             # innovation; the simulation error itself for white noise).
-            return _errors(unpack(z), groups, integrated)
+            return _errors(unpack(z), groups, integrate)
 
-        z, cost, status, _ = least_squares(residual, z0, None, max_steps=max_steps)
+        z, cost, status, _ = least_squares(residual, z0, False, max_steps=max_steps)
+        if integrated:
+            # the output integrated back: its errors sum every earlier sample's, a
+            # criterion far from quadratic away from its minimum, so it is polished from
+            # the fit of the difference, which starts it in the right basin
+            z, cost, status, _ = least_squares(residual, z, True, max_steps=max_steps)
         return unpack(z), cost, status
 
     # every parameter of `new` has the starts' leading axis; a scalar (a `Choice`'s

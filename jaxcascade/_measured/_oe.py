@@ -92,8 +92,9 @@ def _residuals_and_jacobian(theta, nb, nf, records, integrated=False):
 def fit_oe(us, ys, nb: int, nf: int, integrated: bool = False) -> OE:
     """The output-error model of orders `(nb, nf)` on the records `us`, `ys` (sequences of
     1-D arrays, each simulated from rest), from the ARX fit on them joined. `integrated`:
-    the outputs are differences of a measured output (`_integrating`), and the fit
-    minimises the error of the output integrated back, as the loop's refits do."""
+    the outputs are differences of a measured output (`_integrating`), and the fit of the
+    difference is then polished on the error of the output integrated back, as the
+    loop's refits are."""
     records = [(np.asarray(u, float), np.asarray(y, float)) for u, y in zip(us, ys, strict=True)]
     arx = fit_arx(
         np.concatenate([r[0] for r in records]), np.concatenate([r[1] for r in records]), nf, nb
@@ -101,6 +102,15 @@ def fit_oe(us, ys, nb: int, nf: int, integrated: bool = False) -> OE:
     theta = np.concatenate([arx.b, _stabilised(arx.a), [0.0]])
     # the offset of the ARX fit, as an output offset: c / A(1)
     theta[-1] = arx.c / max(1e-6, abs(1 + np.sum(arx.a))) * np.sign(1 + np.sum(arx.a))
+    theta = _levenberg_marquardt(theta, nb, nf, records, False)
+    if integrated:  # polished on the output integrated back, from the difference's fit
+        theta = _levenberg_marquardt(theta, nb, nf, records, True)
+    return OE(theta[:nb], theta[nb : nb + nf], float(theta[-1]))
+
+
+def _levenberg_marquardt(theta, nb, nf, records, integrated):
+    """`theta` refined by Levenberg-Marquardt on the simulation error (Jacobi-scaled
+    normal equations, the poles kept stable by reflection)."""
     residual, J = _residuals_and_jacobian(theta, nb, nf, records, integrated)
     cost, damping = float(residual @ residual), 1e-3
     for _ in range(_MAX_STEPS):
@@ -123,7 +133,7 @@ def fit_oe(us, ys, nb: int, nf: int, integrated: bool = False) -> OE:
             damping *= 10
         if not improved or decrease < _TOLERANCE:
             break
-    return OE(theta[:nb], theta[nb : nb + nf], float(theta[-1]))
+    return theta
 
 
 def validation_error(model: OE, u_vals, y_vals, skip: int = 0, integrating: bool = False):

@@ -69,11 +69,13 @@ class Effect(eqx.Module):
         from the model's input `u`; `None` (the default) for an effect without one."""
         return None
 
-    def recursion(self, v, x_prev):
+    def recursion(self, v, x_prev, x_new):
         """A term added to the linear block's output `x(t)` inside its recursion, from
-        the block's input `v(t)` and its output `x(t-1)` (scalars of one sample): a
-        feedback of the output into the dynamics (`_recursion`, `_feedback`); `None`
-        (the default) for an effect that leaves the recursion alone."""
+        the block's input `v(t)`, its output `x(t-1)` and the value `x(t)` has so far
+        (the linear recursion's, plus the terms of the effects before this one): scalars
+        of one sample; a feedback of the output into the dynamics (`_recursion`,
+        `_feedback`). `None` (the default) for an effect that leaves the recursion
+        alone."""
         return None
 
     # The effect's state (`_initial_state`): the state before a record's first sample

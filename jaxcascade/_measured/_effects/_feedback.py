@@ -13,21 +13,26 @@ Each effect here adds a term to the linear block's recursion (`Effect.recursion`
   lag 0, which sampled continuous dynamics have when the input moves between samples
   (a smooth or first-order-hold input) and the cascade's `a_1 v(t-1)` cannot give.
 - `VelocityFriction` (`velocity_friction`): Coulomb friction on the velocity of an
-  integrating plant, `-f+ s+ - f- s-` with `s = tanh(x(t-1) / EPS)` split by its sign:
-  a force of constant size against the motion (another size each way), acting on the
-  model's own velocity; the viscous part is the block's pole. Tried only where the loop
-  models an output that integrates its input (`_integrating`: `x` is then a velocity).
+  integrating plant: the velocity the dynamics would reach in the sample, `w`, less the
+  friction's share, `x(t) = w - clip(w, -f-, f+)` (`|f+|`, `|f-|`): a force of constant
+  size against the motion (another size each way), which stops a motion slower than it
+  and never reverses one (the discrete Coulomb law; a smooth `sign` of the velocity,
+  `tanh(v / eps)` with `f / eps` beyond the pole, makes the recursion chatter about zero
+  instead); the viscous part is the block's pole. Tried only where the loop models an
+  output that integrates its input (`_integrating`: `x` is then a velocity).
 
 Their residual signature: a polynomial feedback leaves an error that is a nonlinear
 function of past inputs, which the higher-order correlation tests see (`u2_e`, `u2_e2`,
-`e_eu`: Billings' tests, odd terms in `u2_e2`); an input within the sample correlates
+`e_eu`: Billings' tests, odd terms in `u2_e2`), and whose mean moves with the level of
+the input and of the output (`level`, `branch`); an input within the sample correlates
 with the residual at lag 0 (`cross_correlation`); friction makes the error depend on
 the direction of motion (`regime`, `level`, `hysteresis`). Each is tried only where a
 test of its signature failed (`needs_signature`).
 
 Starts: the term's first-order effect on the output is its signal filtered by the
 block's poles, `term / A(q)`, so the residual is regressed on those filtered columns
-(host side); the fit, half of it and zero are the starts, refined with the cascade.
+(host side: the friction's on the sign of the motion); the fit, half of it and zero (a
+small force for the friction) are the starts, refined with the cascade.
 """
 
 from __future__ import annotations
@@ -92,7 +97,7 @@ def _applies(cls, model) -> bool:
 
 class NonlinearFeedback(Effect):
     name: ClassVar[str] = "nonlinear_feedback"
-    signature: ClassVar[tuple[str, ...]] = ("u2_e", "u2_e2", "e_eu")
+    signature: ClassVar[tuple[str, ...]] = ("u2_e", "u2_e2", "e_eu", "level", "branch")
     description: ClassVar[str] = (
         "polynomial of the linear block's past output fed back into it: "
         "x(t) + k2 x(t-1)^2 + k3 x(t-1)^3 (a Duffing spring, a Lur'e loop)"
@@ -101,7 +106,7 @@ class NonlinearFeedback(Effect):
 
     coefficients: Float[Array, " 2"]  # k2, k3
 
-    def recursion(self, v, x_prev):
+    def recursion(self, v, x_prev, x_new):
         k = self.coefficients.astype(x_prev.dtype)
         return x_prev * x_prev * (k[0] + k[1] * x_prev)
 
@@ -132,7 +137,7 @@ class DirectTerm(Effect):
 
     gain: Float[Array, " 1"]
 
-    def recursion(self, v, x_prev):
+    def recursion(self, v, x_prev, x_new):
         return self.gain.astype(v.dtype)[0] * v
 
     @classmethod
@@ -153,24 +158,20 @@ class DirectTerm(Effect):
 
 class VelocityFriction(Effect):
     name: ClassVar[str] = "velocity_friction"
-    signature: ClassVar[tuple[str, ...]] = ("regime", "level", "hysteresis", "mean")
+    signature: ClassVar[tuple[str, ...]] = ("regime", "level", "hysteresis", "mean", "branch")
     description: ClassVar[str] = (
-        "Coulomb friction on the velocity of an integrating plant: x(t) - f+ s+ - f- s-, "
-        "s = tanh(x(t-1) / eps) (positioning systems; with --integrate)"
+        "Coulomb friction on the velocity of an integrating plant: x(t) - clip(x(t), -f-, "
+        "f+), it stops a slow motion, never reverses it (positioning systems; --integrate)"
     )
     needs_signature: ClassVar[bool] = True
     # tried only where the loop models an output that integrates its input
     integrating_only: ClassVar[bool] = True
-    # the smoothing of the friction's sign, in model units of the velocity (its
-    # standard deviation is about one): motion slower than this is nearly stuck
-    EPS: ClassVar[float] = 0.02
 
-    forces: Float[Array, " 2"]  # f+ (moving up), f- (moving down)
+    forces: Float[Array, " 2"]  # f+ (against motion up), f- (against motion down)
 
-    def recursion(self, v, x_prev):
-        f = self.forces.astype(x_prev.dtype)
-        s = jnp.tanh(x_prev / self.EPS)
-        return -(f[0] * jnp.maximum(s, 0.0) + f[1] * jnp.minimum(s, 0.0))
+    def recursion(self, v, x_prev, x_new):
+        f = jnp.abs(self.forces.astype(x_new.dtype))
+        return -jnp.clip(x_new, -f[1], f[0])
 
     @classmethod
     def starts_records(cls, model, records):
@@ -178,17 +179,59 @@ class VelocityFriction(Effect):
             return []
 
         def columns(x, v):
-            s = np.tanh(x / cls.EPS)
-            return (-np.maximum(s, 0.0), -np.minimum(s, 0.0))
+            return (-(x > 0).astype(float), (x < 0).astype(float))
 
+        starts = []
         fit = _regressed(records, columns, model)
-        if fit is None:
-            return []
-        fit = np.maximum(fit, 0.0)  # a force against the motion
-        values = np.array([fit, 0.5 * fit, np.zeros(2)])
-        effect = _batched(cls, forces=values)
-        return [Start(cls.name, model.orders, _repeat(model, len(values)), effect)]
+        if fit is not None:
+            fit = np.abs(fit)  # a force against the motion
+            values = np.array([fit, 0.5 * fit, np.full(2, 1e-3)])
+            effect = _batched(cls, forces=values)
+            starts.append(Start(cls.name, model.orders, _repeat(model, len(values)), effect))
+        found = _moving_fit(model, records)
+        if found is not None:
+            vector, forces = found
+            effect = _batched(cls, forces=[forces, 0.5 * forces])
+            vectors = np.stack([vector, vector])
+            starts.append(Start(f"{cls.name}:moving", model.orders, vectors, effect))
+        return starts
 
     @classmethod
     def starts(cls, model, u, y, residual):
         return cls.starts_records(model, [(u, y, residual)])
+
+
+def _moving_fit(model, records):
+    """A start of the linear block and the friction from the measured motion alone: on
+    the samples where the measured velocity `y` moves (beyond a tenth of its spread), the
+    Coulomb law is `y(t) = w(t) - f+ [y(t) > 0] + f- [y(t) < 0]`, linear in the block's
+    coefficients and the forces, so a least-squares fit of `y(t)` on `-y(t-j)`, `u(t-i)`
+    and the signs gives both (equation error: a start, not an estimate). Returned as the
+    cascade's vector (one slope a side, no gap: `_oe.cascade_vector`'s form) and the
+    forces, or None where the records hold too few moving samples or no gain at lag 1."""
+    from .._oe import GAP
+
+    o = model.orders
+    lags = max(o.r, o.p)
+    rows, targets = [], []
+    for u, y, _ in records:
+        u, y = np.asarray(u, float), np.asarray(y, float)
+        moving = np.abs(y) > 0.1 * np.std(y)
+        for t in range(lags, len(y)):
+            if not moving[t]:
+                continue
+            row = [-y[t - j] for j in range(1, o.p + 1)] + [u[t - i] for i in range(1, o.r + 1)]
+            rows.append(row + [-float(y[t] > 0), float(y[t] < 0)])
+            targets.append(y[t])
+    if len(rows) < 10 * (o.p + o.r + 2):
+        return None
+    theta = np.linalg.lstsq(np.asarray(rows), np.asarray(targets), rcond=None)[0]
+    b, gains, forces = theta[: o.p], theta[o.p : o.p + o.r], np.abs(theta[-2:])
+    if not abs(gains[0]) > 1e-6 * np.max(np.abs(gains)) or not np.all(np.isfinite(theta)):
+        return None
+    current = model.params.to_dict()
+    values = {"MR1": gains[0], "ML1": gains[0], "cL": GAP, "mR": 1.0, "cR": GAP}
+    values.update({f"a{i}": gains[i - 1] / gains[0] for i in range(2, o.r + 1)})
+    values.update({f"b{j}": b[j - 1] for j in range(1, o.p + 1)})
+    vector = [values.get(name, current[name] if name.startswith("D") else 0.0) for name in o.names]
+    return np.asarray(vector, float), forces

@@ -15,11 +15,12 @@ the sensor or the output stage, and with dynamics after it:
 - `OutputDynamics` (`output_dynamics`): a second linear block after the static part,
   `y_out = (1 + beta_1 q^-1 + ..) / (1 + alpha_1 q^-1 + ..) y` (unit gain at high
   frequency: the cascade holds the gain): the Wiener-Hammerstein sandwich (J. Voros has
-  published its form with an output backlash). Proposed only after a static map
-  (without one it would be the linear block's own dynamics: `dynamics_order`).
+  published its form with an output backlash: the cascade's backlash, and a static map
+  where one was added, sit between the two linear blocks).
 
 Signatures: a static map of the output leaves an error that is a nonlinear function of
-past inputs (`u2_e`, `u2_e2`, `e_eu`) and of the level (`level`, `mean`); dynamics after
+past inputs (`u2_e`, `u2_e2`, `e_eu`) and of the level of the input and the output
+(`level`, `branch`, `mean`); dynamics after
 it leave a coloured error correlated with the input (`autocorrelation`,
 `cross_correlation`, `spectrum`). Starts: the polynomial's coefficients regressed on the
 current output's powers, the fold at the lower quantiles of the current output (where a
@@ -51,7 +52,7 @@ def _static(model) -> bool:
 
 class OutputPolynomial(Effect):
     name: ClassVar[str] = "output_polynomial"
-    signature: ClassVar[tuple[str, ...]] = ("u2_e", "u2_e2", "e_eu", "level")
+    signature: ClassVar[tuple[str, ...]] = ("u2_e", "u2_e2", "e_eu", "level", "branch")
     description: ClassVar[str] = (
         "static polynomial map of the output: y + c0 + c2 y^2 + c3 y^3 (a Wiener "
         "structure: a saturating or square-law sensor or output stage)"
@@ -166,7 +167,7 @@ class OutputDynamics(Effect):
 
     @classmethod
     def starts_records(cls, model, records):
-        if not _static(model) or any(isinstance(e, cls) for e in model.effects):
+        if not model.cascade or any(isinstance(e, cls) for e in model.effects):
             return []
         starts = []
         for k in cls.orders:
