@@ -204,10 +204,11 @@ def test_the_parallel_forms_are_chosen_on_an_accelerator(monkeypatch):
         params = CascadeParams.from_vector(vector, orders, check=False)
         return _simulate.signals(params, u), _sensitivity.output_jacobian(params, u)
 
+    # the CPU's forms first (the default there; chosen here on any backend)
+    monkeypatch.setattr(_scans, "parallel", lambda: False)
     want = jax.jit(jax.vmap(run))(vectors, u)
     params = CascadeParams.from_vector(vectors[0], orders)
     plain = _simulate.linear_block(params, u[0], block=1)
-    assert not _scans.parallel()  # the tests run on the CPU: sequential by default
     # the sequential forms step through the record's 700 samples; the parallel ones loop
     # over log2 rounds only
     assert "length=700" in str(jax.make_jaxpr(jax.vmap(run))(vectors, u))
