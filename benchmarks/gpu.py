@@ -131,7 +131,7 @@ def _bench_row(arguments, env, log, folder, name) -> dict:
 
 def _sweep_row(arguments, env, log, folder, realisations) -> dict:
     out = folder / "sweep.parquet"
-    wall, _ = _run([*arguments, "--out", str(out), "--quiet"], env, log)
+    wall, _ = _run([*arguments, "--out", str(out)], env, log)
     import pandas as pd
 
     table = pd.read_parquet(out)
