@@ -207,6 +207,13 @@ mutations() {  # issue 40: each deleted body (an effect, pem's iteration, robust
     # against the default-run tests that must catch it
     python benchmarks/mutation_check.py --out results/mutation_check
 }
+gpu() {  # issue 69: literal, robust, recursive and the 12-cell sweep on a GPU and on the same
+    # machine's CPU in one sitting (results/gpu.{csv,md}); where no GPU is found it says it
+    # skipped. Run by name (`bash benchmarks/run_all.sh gpu`): it joins `all` and
+    # results/README.md's table once results/gpu.{csv,md} come from a GPU machine
+    # (tests/test_results_listing.py holds the table's files to the tracked ones)
+    bash benchmarks/gpu.sh
+}
 all=(bench profile bench_robust speed speed_damper distributed robust sweeps literal efficiency effects_loop loop
     stability backlash reproduce recursive inputs noise nonlinear stand_ins declared statuses general general_brfd
     slow_tests default_tests profile_tests mutations)

@@ -43,6 +43,8 @@ from . import _baseline, _flops
 
 # Settings of `voros` (and of the baseline's) that never stop early: a fixed workload.
 NO_EARLY_STOP = {"tol": -1.0, "se_tol": -1.0, "cost_tol": -1.0}
+# Realisations per batch on an accelerator (`batched_fit`).
+ACCELERATOR_BATCH = 4096
 
 SUMMARY_KEYS = (
     "fits_per_s",
@@ -100,20 +102,26 @@ def batched_fit(
     records inside the call), so batches are large (default 256: on the 2-core CPU, 250
     to 1000 ran at the same speed within noise, 128 about 15% slower); the XLA backend
     materialises an N x P regressor matrix per realisation, so its batches are kept
-    cache-sized (default 16).
+    cache-sized (default 16) on a CPU. On an accelerator (`_scans.parallel`: the
+    recursions in time are associative scans) a batch is a few large kernels per
+    iteration, so it is as wide as device memory comfortably allows
+    (`ACCELERATOR_BATCH`, about 1.5 MB a realisation at N 4000): larger batches only
+    bound memory, the batches running one after another.
     """
     import jax
     import jax.numpy as jnp
 
     from .._estimator._literal import voros
     from .._estimator._normal_equations import resolve
+    from .._system import _scans
     from .._system._simulate import measure, uniform_input
     from ._batching import chunked_vmap
 
     ex = get_example(example_number)
     dtype = dtype or jnp.result_type(float)
     backend = resolve(backend, ex.orders, dtype)
-    batch = batch or (256 if backend == "fused" else 16)
+    if batch is None:
+        batch = 256 if backend == "fused" else ACCELERATOR_BATCH if _scans.parallel() else 16
 
     def one(key, params):
         key_u, key_e = jax.random.split(key)
@@ -143,12 +151,14 @@ def run_jax(
     """Compile and time the batched path; returns a dict of figures.
 
     The realisations are split over `workers` host threads (default: the cores this
-    process may use, `_batching.host_workers`), one compiled program of one part's shape
-    (`_batching.host_threads`); `workers=1` runs them as one call."""
+    process may use, `_batching.host_workers`; on an accelerator 1, the device being
+    one), one compiled program of one part's shape (`_batching.host_threads`);
+    `workers=1` runs them as one call."""
     import jax
     import jax.numpy as jnp
 
     from .._estimator._normal_equations import resolve
+    from .._system import _scans
     from ._batching import host_threads, host_workers, split_batch
 
     dtype = jnp.result_type(float)
@@ -161,7 +171,7 @@ def run_jax(
     build_s = time.perf_counter() - start
     start = time.perf_counter()
     fit, backend = batched_fit(example_number, n, iterations, dtype, backend=backend, batch=batch)
-    workers = workers or host_workers()
+    workers = workers or (1 if _scans.parallel() else host_workers())
     pieces, _ = split_batch(keys, workers)
     compiled = host_threads(fit.lower(pieces[0], params).compile(), len(pieces))
     compile_s = time.perf_counter() - start

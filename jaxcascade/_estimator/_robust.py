@@ -83,6 +83,7 @@ from jaxtyping import Array, Float, PRNGKeyArray
 
 from .._compile import exported
 from .._status import Status
+from .._system import _scans
 from .._system._model import CascadeParams, Orders, is_admissible
 from .._system._prior import random_systems
 from .._system._validate import record
@@ -107,6 +108,12 @@ from ._solution import PATH_ADAPTIVE, PATH_MULTISTART, Solution, finite
 # of the truth (4 of the 68 before).
 _ITERATE = 2
 _ITERATE_BOUND = 0.5
+# The fewest records of a multi-start round under `vmap` on an accelerator
+# (`_scans.parallel`), whatever `fallback_batch`: there a round of 64 records costs
+# about what a round of 4 does, and each round is a sequence of loops whose steps are
+# kernel launches. The records and their estimates are the same; only how many run
+# side by side changes.
+ACCELERATOR_ROUND = 64
 
 
 def _best(costs, k):
@@ -153,7 +160,8 @@ def robust(
       as its slowest fit, and as wide as `fallback_batch` whatever the number of records
       still pending: on the random family's benchmark (256 records, 168 of them on the
       multi-start) 4 gave 1.3 times the fits per CPU second of 8 (alternated runs), 2
-      about the same as 4.
+      about the same as 4. On an accelerator a round is at least `ACCELERATOR_ROUND`
+      (64) records wide.
     - `retries`: further multi-starts, each from fresh draws, for a record whose
       multi-start estimate fails the basin test (module docstring, step 4).
     - `max_steps`: Levenberg-Marquardt's budgets on the subset and on the whole record
@@ -373,7 +381,9 @@ def _fallback(multistart, size: int, retries: int):
             return leaf if flag else jnp.broadcast_to(leaf, (axis_size, *jnp.shape(leaf)))
 
         u, y, key, stage = jax.tree_util.tree_map(batched, (u, y, key, stage), tuple(in_batched))
-        width = min(size, axis_size)
+        # on an accelerator a round's width costs little of its time: wider rounds, fewer
+        # of them (each a loop over Levenberg-Marquardt steps)
+        width = min(max(size, ACCELERATOR_ROUND) if _scans.parallel() else size, axis_size)
 
         def more(carry):
             return jnp.any(carry[0])

@@ -19,6 +19,12 @@ state and its tangent (`output_jacobian`); per step it costs O(p P) flops, so th
 per-step overhead, not arithmetic, sets its time. Exact up to rounding: it equals
 `jax.jacfwd` of `_simulate.signals(...).y` (the test compares them; the switching rule
 is `_simulate.backlash_switches`).
+
+On an accelerator (`_scans.parallel`) the same recursions run as associative scans
+(`output_jacobian_parallel`): the pole recursion of `x` and, with the same poles, of
+its tangents (`_scans.poles_blocked`, `dw` and `-x(t-j)` as right-hand sides), the backlash
+(`_scans.backlash`), its switches from the output before, and `dy` as the value of the
+last sample on a branch (`_scans.last_active`). Equal up to rounding.
 """
 
 from __future__ import annotations
@@ -27,6 +33,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
+from .._system import _scans
 from .._system._model import CascadeParams
 from .._system._simulate import backlash_switches, shift
 
@@ -69,7 +76,10 @@ def output_jacobian(
     params: CascadeParams, u: Float[Array, " T"]
 ) -> tuple[Float[Array, " T"], Float[Array, "T P"]]:
     """Noise-free output `y` of one record and `d y(t) / d theta` (columns in
-    `Orders.names` order), in one scan (module docstring)."""
+    `Orders.names` order), in one scan (module docstring); on an accelerator by
+    associative scans (`output_jacobian_parallel`)."""
+    if _scans.parallel():
+        return output_jacobian_parallel(params, u)
     o = params.orders
     dtype = u.dtype
     vector = params.to_vector().astype(dtype)
@@ -105,3 +115,35 @@ def output_jacobian(
     )
     _, (y, J) = jax.lax.scan(step, carry, (w, dw))
     return y, J
+
+
+def output_jacobian_parallel(
+    params: CascadeParams, u: Float[Array, " T"]
+) -> tuple[Float[Array, " T"], Float[Array, "T P"]]:
+    """`output_jacobian` by associative scans (module docstring): the same output and
+    Jacobian up to rounding, in log-depth rounds over time."""
+    o = params.orders
+    dtype = u.dtype
+    vector = params.to_vector().astype(dtype)
+    b = vector[o.slices["b"]]
+    cL, mR, cR = vector[-3], vector[-2], vector[-1]
+    w, dw = _numerator(params, u)
+    x = _scans.poles_blocked(b, w)
+    # the tangents' recursion has the poles of x's; `b_j`'s column is driven by -x(t-j)
+    T = x.shape[0]
+    drive = [dw] + [-jnp.pad(x, (j, 0))[:T, None] for j in range(1, o.p + 1)]
+    dx = _scans.poles_blocked(b, jnp.concatenate(drive, axis=1))
+    y = _scans.backlash(x, x + cL, mR * (x - cR), mR)
+    g1, g2 = backlash_switches(x, shift(y, 1), cL, mR, cR)
+    # the step's expressions of `output_jacobian`, every sample at once
+    zeros = jnp.zeros((T, dx.shape[1]), dtype)
+    dx_full = jnp.concatenate([dx, jnp.zeros((T, 3), dtype)], axis=1)
+    e_cL, e_mR, e_cR = jnp.eye(3, dtype=dtype)
+    gap = jnp.concatenate([zeros, jnp.broadcast_to(e_cL, (T, 3))], axis=1)
+    on_line = g1[:, None] * (dx_full + gap)
+    on_line += g2[:, None] * (
+        jnp.concatenate([zeros, e_mR * (x - cR)[:, None] - mR * e_cR], 1) + mR * dx_full
+    )
+    # off both branches the output holds, and so does its derivative
+    held = (1 - g1) * (1 - g2)
+    return y, _scans.last_active(held == 0, on_line)

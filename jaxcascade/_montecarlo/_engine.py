@@ -52,7 +52,11 @@ for a changing system.
 
 **Memory.** Peak memory of a chunk grows as `chunk_size x N` (each realisation holds a
 few `N x P` regression matrices and signals of length N); `chunk_memory` reports
-XLA's buffer sizes for a cell and chunk size.
+XLA's buffer sizes for a cell and chunk size. It does not grow with the number of
+realisations, which run chunk after chunk: with the forms an accelerator compiles
+(the parallel scans, XLA's normal equations; `Spec.chunk_size` 1000 there), a chunk of
+1000 Example 1 records of N 4000 asks for 2.35 GiB (literal) and 2.43 GiB (robust), by
+`chunk_memory` of those programs compiled for the CPU.
 """
 
 from __future__ import annotations

@@ -9,6 +9,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float, PRNGKeyArray
 
+from . import _scans
 from ._model import CascadeParams
 from ._validate import record
 
@@ -59,6 +60,9 @@ def linear_block(
     `G` the response to the `p` past outputs `s`, so the sequential `lax.scan` takes
     `T / block` steps instead of `T` (exact up to rounding; the per-step overhead of a
     scan, not its arithmetic, dominates on a CPU). `block=1` is the plain recursion.
+    On an accelerator (`_scans.parallel`) the blocks' starting states come from an
+    associative scan of their affine maps instead (`_scans.poles_blocked`, equal up to
+    rounding), except with `block=1`.
     """
     a = jnp.concatenate([jnp.ones((1,), v.dtype), params.a.astype(v.dtype)])
     w = sum(a[i - 1] * shift(v, i) for i in range(1, params.orders.r + 1))
@@ -66,6 +70,8 @@ def linear_block(
     if p == 0:
         return w
     b = params.b.astype(v.dtype)
+    if block > 1 and _scans.parallel():
+        return _scans.poles_blocked(b, w, block)
     if block <= 1 or v.shape[0] <= block:
         return _poles_scan(b, w)
     return _poles_blocked(b, w, block)
@@ -120,8 +126,12 @@ def backlash_switches(x, y_prev, cL, mR, cR) -> tuple[Array, Array]:
 
 
 def backlash(params: CascadeParams, x: Float[Array, " T"]) -> Float[Array, " T"]:
-    """Backlash ND (eq. 9) as a `lax.scan`; its state starts at y = 0."""
+    """Backlash ND (eq. 9) as a `lax.scan`; its state starts at y = 0. On an accelerator
+    (`_scans.parallel`) an associative scan of the samples' clamp and threshold maps
+    (`_scans.backlash`: the same values, `mR > 0`)."""
     cL, mR, cR = (jnp.asarray(c, x.dtype) for c in (params.cL, params.mR, params.cR))
+    if _scans.parallel():
+        return _scans.backlash(x, x + cL, mR * (x - cR), mR)
 
     def step(y_prev, x_t):
         g1, g2 = backlash_switches(x_t, y_prev, cL, mR, cR)
@@ -165,12 +175,26 @@ def general_switches(nd, x, y_prev) -> tuple[Array, Array]:
     return g1, g2
 
 
+def general_branches(nd, x) -> tuple[Array, Array]:
+    """The values `(fL(x), fR(x))` the general backlash takes on its left and right
+    branches, computed as `general_backlash`'s step computes them (at degree 1 the
+    straight lines `x + cL`, `mR (x - cR)`)."""
+    cL, mR, cR = (jnp.asarray(c, x.dtype) for c in (nd.cL, nd.mR, nd.cR))
+    left = _plus(x + cL, _curvature(nd.curveL, x + cL))
+    right = _curvature(nd.curveR, x - cR)
+    return left, _plus(mR * (x - cR), right)
+
+
 def general_backlash(nd, x: Float[Array, " T"], y_prev=None) -> Float[Array, " T"]:
     """The general backlash on the signal `x` as a `lax.scan`, its state starting at
     `y_prev` (the output before `x(0)`; default 0, rest). At degree 1 every expression
-    is `backlash`'s: the same output bit for bit."""
+    is `backlash`'s: the same output bit for bit. On an accelerator (`_scans.parallel`)
+    an associative scan of the samples' maps with the curved branches' values
+    (`_scans.backlash`)."""
     cL, mR, cR = (jnp.asarray(c, x.dtype) for c in (nd.cL, nd.mR, nd.cR))
     y0 = jnp.zeros((), x.dtype) if y_prev is None else jnp.asarray(y_prev, x.dtype)
+    if _scans.parallel():
+        return _scans.backlash(x, *general_branches(nd, x), mR, y0)
 
     def step(y_prev, x_t):
         g1, g2 = general_switches(nd, x_t, y_prev)
