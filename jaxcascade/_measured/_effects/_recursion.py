@@ -31,9 +31,9 @@ LIMIT = 1e6
 
 def linear_with_terms(params: CascadeParams, v, terms, v_past=None, x_past=None):
     """The linear block's output `x` for the input `v` (1-D) with the `terms`
-    (callables `term(v_t, x_prev, x_new)`, `Effect.recursion`) inside its recursion, continued from the past
-    `v_past` (`v(-1) .. v(-r)`) and `x_past` (`x(-1) .. x(-p)`), newest first (default
-    zero: rest). Needs `p >= 1`."""
+    (callables `term(v_t, x_prev, x_new)`, `Effect.recursion`) inside its recursion,
+    continued from the past `v_past` (`v(-1) .. v(-r)`) and `x_past` (`x(-1) .. x(-p)`),
+    newest first (default zero: rest). Needs `p >= 1`."""
     o, T, dtype = params.orders, v.shape[0], v.dtype
     v_past = jnp.zeros((o.r,), dtype) if v_past is None else v_past.astype(dtype)
     x_past = jnp.zeros((o.p,), dtype) if x_past is None else x_past.astype(dtype)
