@@ -890,14 +890,8 @@ def model_error_loop(
     y_val_np = [np.asarray(y, float) for _, y in checked]
     if not several:
         u_val_np, y_val_np = u_val_np[0], y_val_np[0]
-    # the scored samples of every validation record, joined (the pooled NRMSE's scale;
-    # of the output integrated back where the outputs are differences)
-    scored_val = np.concatenate(
-        [
-            np.cumsum(y[int(init_samples) :]) if integrating else y[int(init_samples) :]
-            for _, y in checked
-        ]
-    )
+    # the scored samples of every validation record, joined (the pooled NRMSE's scale)
+    scored_val = np.concatenate([y[int(init_samples) :] for _, y in checked])
 
     def assess(model):
         return evaluate(model, u_val_np, y_val_np, sample_period, window, init_samples, integrating)
@@ -1373,22 +1367,16 @@ def _score_candidate(
     evaluation = assess(fitted)
     # The evidence of every record: the validation record out of sample and the
     # estimation records in sample, each a squared NRMSE difference (module docstring).
+    # (an output integrated back, `_integrating`, is tested on its difference: the
+    # integrated errors are persistent, a random walk's, and their long-run variance is
+    # not the Newey-West estimate's; its error, and so the gain asked, is the integrated
+    # output's)
+    validation = diebold_mariano(current.residual, evaluation.residual, "simulation")
     in_sample = [np.asarray(y) - simulated_output(fitted, u) for u, y in zip(us, ys, strict=True)]
-    current_sample = [r[2] for r in records]
-    scales = [float(np.var(r[1])) for r in records]
-    current_residual, new_residual = current.residual, evaluation.residual
-    if current.integrated_residual is not None and evaluation.integrated_residual is not None:
-        # an output integrated back (`_integrating`): the errors of the measured output
-        # itself, which the fits minimise and the error scores (`_errors`, `evaluate`)
-        current_residual, new_residual = current.integrated_residual, evaluation.integrated_residual
-        in_sample = [np.cumsum(e) for e in in_sample]
-        current_sample = [np.cumsum(e) for e in current_sample]
-        scales = [float(np.var(np.cumsum(r[1]))) for r in records]
-    validation = diebold_mariano(current_residual, new_residual, "simulation")
     comparison = diebold_mariano_records(
-        [current_residual, *current_sample],
-        [new_residual, *in_sample],
-        [options.get("validation_scale", 1.0), *scales],
+        [current.residual, *(r[2] for r in records)],
+        [evaluation.residual, *in_sample],
+        [options.get("validation_scale", 1.0), *(float(np.var(r[1])) for r in records)],
         "simulation",
     )
     gain = 1 - evaluation.error / current.error
