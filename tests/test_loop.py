@@ -73,6 +73,32 @@ def test_loop_names_the_undeclared_effect_among_rivals(effect):
     _check_named(effect, result)
 
 
+def test_loop_names_the_friction_of_an_integrating_axis():
+    # The force and position of an axis under proportional control with Coulomb
+    # friction (`_testing.axis_record`): the loop models the position's difference and
+    # names the friction among its rivals; the forces come back near the truth.
+    from jaxcascade._measured._testing import INTEGRATING, axis_record
+
+    friction = INTEGRATING["velocity_friction"]
+    k_est, k_val = jax.random.split(jax.random.PRNGKey(1))
+    u, y = axis_record(k_est, N, SNR, friction)
+    u_val, y_val = axis_record(k_val, N, SNR, friction)
+    library = ("velocity_friction", *RIVALS)
+    result = model_error_loop(
+        u[1:],
+        np.diff(y),
+        u_val[1:],
+        np.diff(y_val),
+        jc.Orders(),
+        effects=library,
+        integrating=True,
+    )
+    assert result.added == ["velocity_friction"]
+    assert result.after.error < 0.1 * result.before.error
+    forces = np.abs(np.asarray(result.final.effects[-1].forces))
+    np.testing.assert_allclose(forces, friction, atol=0.1)
+
+
 def _check_named(effect, result):
     expected = [] if effect is None else [effect]
     assert result.added == expected
