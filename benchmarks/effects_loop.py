@@ -5,7 +5,11 @@
 Each record is Example 1 with one effect of the library present but not declared
 (`jaxcascade._measured._testing.UNDECLARED`), at SNR 20 (noise floor 1/SNR = 0.05), 2000
 estimation and 2000 validation samples with independent inputs and noise; plus a
-record with no extra effect. Writes OUT.csv and OUT.md: the effect present, the
+record with no extra effect; plus the force and position of an axis under proportional
+control with Coulomb friction (`_testing.INTEGRATING`, `axis_record`: the loop models the
+position's difference, `integrating=True`, and its NRMSE is the position's; its noise is
+the position's, at SNR 20 of the velocity, so the floor is not 1/SNR there: `-` in the
+floor column). Writes OUT.csv and OUT.md: the effect present, the
 effects the loop added, NRMSE before and after, the ratio to the noise floor, and the
 runtime. Each record's row is appended to OUT.rows.jsonl as it finishes, and a run
 started again with the same settings resumes from it (`--fresh` starts over); the file
@@ -37,31 +41,47 @@ def main(argv=None) -> int:
     from partial_rows import append, open_rows
 
     import jaxcascade as jc
-    from jaxcascade._measured._testing import UNDECLARED, undeclared_record
+    import numpy as np
+
+    from jaxcascade._measured._testing import (
+        INTEGRATING,
+        UNDECLARED,
+        axis_record,
+        undeclared_record,
+    )
 
     out = pathlib.Path(args.out)
     settings = {"seed": args.seed, "snr": args.snr, "n": args.n}
     done, partial = open_rows(out, settings, lambda row: row["effect_present"], args.fresh)
     rows = []
-    for name in UNDECLARED:
-        if (name or "none") in done:
-            rows.append(done[name or "none"])
+    cases = [(name, False) for name in UNDECLARED]
+    cases += [(name, True) for name in INTEGRATING if name is not None]
+    for name, integrating in cases:
+        label = (name or "none") + (" (integrating axis)" if integrating else "")
+        if label in done:
+            rows.append(done[label])
             continue
-        model, ar = UNDECLARED[name]()
         key = jax.random.PRNGKey(args.seed)
         k_est, k_val = jax.random.split(key)
-        u, y = undeclared_record(model, k_est, args.n, args.snr, ar)
-        u_val, y_val = undeclared_record(model, k_val, args.n, args.snr, ar)
+        if integrating:
+            friction = INTEGRATING[name]
+            u, y = axis_record(k_est, args.n + 1, args.snr, friction)
+            u_val, y_val = axis_record(k_val, args.n + 1, args.snr, friction)
+            u, y, u_val, y_val = u[1:], np.diff(y), u_val[1:], np.diff(y_val)
+        else:
+            model, ar = UNDECLARED[name]()
+            u, y = undeclared_record(model, k_est, args.n, args.snr, ar)
+            u_val, y_val = undeclared_record(model, k_val, args.n, args.snr, ar)
         start = time.perf_counter()
-        result = jc.model_error_loop(u, y, u_val, y_val, jc.Orders())
+        result = jc.model_error_loop(u, y, u_val, y_val, jc.Orders(), integrating=integrating)
         rows.append(
             {
-                "effect_present": name or "none",
+                "effect_present": label,
                 "effect_added": ",".join(result.added) or "none",
                 "named": bool(result.added == ([name] if name else [])),
                 "nrmse_before": float(result.before.error),
                 "nrmse_after": float(result.after.error),
-                "after_over_floor": float(result.after.error * args.snr),
+                "after_over_floor": None if integrating else float(result.after.error * args.snr),
                 "residual_tests_pass_after": bool(result.after.tests.ok),
                 "seconds": time.perf_counter() - start,
             }
@@ -82,7 +102,8 @@ def main(argv=None) -> int:
     for r in rows:
         lines.append(
             f"| {r['effect_present']} | {r['effect_added']} | {r['named']} | "
-            f"{r['nrmse_before']:.4f} | {r['nrmse_after']:.4f} | {r['after_over_floor']:.2f} | "
+            f"{r['nrmse_before']:.4f} | {r['nrmse_after']:.4f} | "
+            f"{'-' if r['after_over_floor'] is None else format(r['after_over_floor'], '.2f')} | "
             f"{r['residual_tests_pass_after']} | {r['seconds']:.0f} |"
         )
     out.with_suffix(".md").write_text("\n".join(lines) + "\n")

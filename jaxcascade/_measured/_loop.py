@@ -73,6 +73,7 @@ from ._effects import (
     backlash_of,
     choose,
     grouping,
+    linear_orders,
     padded,
     padded_to,
     plain,
@@ -1020,7 +1021,9 @@ def model_error_loop(
         tasks = [(k, name, action) for k, (name, action) in enumerate(todo, start=1)]
         if noise_tried:
             tasks.append((count, ARNoise.name, "noise"))
-        context = (fit_against, judged_by, noise_alpha)
+        # the orders the validation records chose for a linear model (`DynamicsOrder`)
+        linear = None if floor is None else floor.oe.orders
+        context = (fit_against, judged_by, noise_alpha, linear)
         # Up to `threads` candidates are fitted and scored at once (`_Workers`); each is
         # announced, saved and reported here, in order. Programs are freed past the bound
         # (`bound`: each candidate compiles programs of its own structure, about a hundred
@@ -1234,7 +1237,7 @@ def _candidate_work(name, action, saved, context):
     any thread (`_Workers`). `action`: "add", "replace" or "noise" (the noise model).
     Returns `(Candidate or None, seconds of the fit or None where loaded, the noise
     model's p-value or None)`."""
-    fit_against, judged_by, noise_alpha = context
+    fit_against, judged_by, noise_alpha, linear = context
     model, current, failed, round_, us, ys, records, assess = fit_against
     began = time.monotonic()
     if action == "noise":
@@ -1247,7 +1250,8 @@ def _candidate_work(name, action, saved, context):
         c = _score_noise(noise_model, p_value, current, failed, round_, assess, **options)
         return c, seconds, p_value
     if saved is None:
-        fit = _fit_candidate(name, model, us, ys, records, action)
+        with linear_orders(linear):
+            fit = _fit_candidate(name, model, us, ys, records, action)
     else:
         fit = None if saved["model"] is None else (model_from_dict(saved["model"]), saved["label"])
     seconds = time.monotonic() - began if saved is None else None

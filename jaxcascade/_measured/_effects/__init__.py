@@ -39,6 +39,9 @@ from ._base import (
     backlash_of as backlash_of,
 )
 from ._base import (
+    linear_orders as linear_orders,
+)
+from ._base import (
     padded as padded,
 )
 from ._base import (

@@ -472,19 +472,46 @@ def _embed(params: CascadeParams, orders: Orders, values: dict) -> np.ndarray:
     return np.array([values.get(name, old.get(name, 0.0)) for name in orders.names])
 
 
+# The orders `(zeros, poles)` of the linear output-error model the loop's validation
+# records chose (`_loop.Floor`, `_oe.linear_floor`), set by a loop for its run
+# (`linear_orders`): `DynamicsOrder` also proposes them.
+_LINEAR_ORDERS = contextvars.ContextVar("jaxcascade_linear_orders", default=None)
+
+
+@contextlib.contextmanager
+def linear_orders(orders: tuple[int, int] | None):
+    """Within the block, `DynamicsOrder` also proposes the linear block of `orders`
+    `(r, p)` (where they exceed the model's): the orders the validation records support,
+    reached in one round rather than a pole a round."""
+    token = _LINEAR_ORDERS.set(None if orders is None else tuple(int(k) for k in orders))
+    try:
+        yield
+    finally:
+        _LINEAR_ORDERS.reset(token)
+
+
 class DynamicsOrder(Effect):
     name: ClassVar[str] = "dynamics_order"
     signature: ClassVar[tuple[str, ...]] = ("autocorrelation", "cross_correlation", "spectrum")
-    description: ClassVar[str] = "one more pole (p + 1) or zero (r + 1) in the linear block"
+    description: ClassVar[str] = (
+        "one more pole (p + 1) or zero (r + 1) in the linear block, or the orders of the "
+        "linear model the validation records choose"
+    )
 
     @classmethod
     def starts(cls, model, u, y, residual):
         o = model.orders
         starts = []
-        for label, orders in (
+        variants = [
             ("pole", Orders(o.nR, o.nL, o.r, o.p + 1)),
             ("zero", Orders(o.nR, o.nL, o.r + 1, o.p)),
-        ):
+        ]
+        chosen = _LINEAR_ORDERS.get()
+        if chosen is not None:
+            r, p = max(o.r, chosen[0]), max(o.p, chosen[1])
+            if (r, p) not in [(v.r, v.p) for _, v in variants] and (r, p) != (o.r, o.p):
+                variants.append((f"linear({r},{p})", Orders(o.nR, o.nL, r, p)))
+        for label, orders in variants:
             vector = _embed(model.params, orders, {})
             starts.append(Start(f"{cls.name}:{label}", orders, vector[None], cls()))
         return starts
