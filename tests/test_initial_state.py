@@ -16,17 +16,23 @@ from jaxcascade._measured._effects import (
     BacklashFrictionContacts,
     CurvedBacklash,
     DahlFriction,
+    DirectTerm,
     DynamicsOrder,
     ExtendedModel,
     InputBacklash,
     InputDelay,
+    NonlinearFeedback,
     OutputDrift,
+    OutputDynamics,
     OutputFeedthrough,
+    OutputFold,
     OutputOffset,
+    OutputPolynomial,
     OutputSaturation,
     PrandtlIshlinskii,
     PwlSegment,
     SlackFriction,
+    VelocityFriction,
     simulate_with_switches,
 )
 from jaxcascade._measured._initial_state import (
@@ -68,6 +74,12 @@ INSTANCES = {
     "dahl_friction": DahlFriction(*_a(4.0, -0.7)),
     "input_backlash": InputBacklash(*_a(0.25)),
     "general_backlash": CurvedBacklash(jnp.array([0.0, 0.04]), jnp.array([0.0, 0.05])),
+    "nonlinear_feedback": NonlinearFeedback(jnp.array([0.05, -0.08])),
+    "direct_term": DirectTerm(jnp.array([0.6])),
+    "velocity_friction": VelocityFriction(jnp.array([0.3, 0.4])),
+    "output_polynomial": OutputPolynomial(jnp.array([0.0, 0.15, -0.08])),
+    "output_fold": OutputFold(jnp.array([0.0, 1.0, 0.0, -0.4])),
+    "output_dynamics": OutputDynamics(jnp.array([0.4]), jnp.array([-0.6])),
 }
 
 
