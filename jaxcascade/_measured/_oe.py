@@ -57,16 +57,47 @@ class OE:
         return np.concatenate([[1.0], self.f])
 
 
+# The largest reflection coefficient of `F` (Schur-Cohn): the cascade's refits hold the
+# linear block's poles by reflection coefficients within 0.999 (`_estimator._refine`), so
+# a floor inside this bound is a start they take as it is.
+REFLECTION_BOUND = 0.9989
+
+
+def _reflection(f: np.ndarray) -> np.ndarray:
+    """Reflection coefficients `k_1..k_n` of `1 + f_1 q^-1 + ..` (step-down recursion;
+    `_system._model.reflection_coefficients` on the host)."""
+    poly = np.concatenate([[1.0], f])
+    ks = []
+    for m in range(len(f), 0, -1):
+        k = poly[m]
+        ks.append(k)
+        poly = (poly[:m] - k * poly[m:0:-1]) / (1 - k**2 if abs(k) < 1 else 1.0)
+    return np.array(ks[::-1])
+
+
+def _step_up(k: np.ndarray) -> np.ndarray:
+    """Inverse of `_reflection`."""
+    poly = np.ones(1)
+    for value in k:
+        padded = np.concatenate([poly, [0.0]])
+        poly = padded + value * padded[::-1]
+    return poly[1:]
+
+
 def _stabilised(f: np.ndarray) -> np.ndarray:
-    """`F` with every root outside the unit circle reflected inside (`1 / conj(root)`)."""
+    """`F` with every root outside the unit circle reflected inside (`1 / conj(root)`),
+    and its reflection coefficients within `REFLECTION_BOUND`."""
     if f.size == 0:
         return f
     roots = np.roots(np.concatenate([[1.0], f]))
     outside = np.abs(roots) >= 1
-    if not outside.any():
+    if outside.any():
+        roots = np.where(outside, 1 / np.conj(roots) * 0.999, roots)
+        f = np.real(np.poly(roots))[1:]
+    k = _reflection(f)
+    if np.all(np.abs(k) <= REFLECTION_BOUND):
         return f
-    roots = np.where(outside, 1 / np.conj(roots) * 0.999, roots)
-    return np.real(np.poly(roots))[1:]
+    return _step_up(np.clip(k, -REFLECTION_BOUND, REFLECTION_BOUND))
 
 
 def _residuals_and_jacobian(theta, nb, nf, records, integrated=False):
