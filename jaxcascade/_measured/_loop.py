@@ -1043,6 +1043,10 @@ def model_error_loop(
                     future = workers.submit(_candidate_work, name, action, saved, context)
                     pending.append((task, item, saved, future))
                 if not pending:
+                    if drain:  # the bound's release waited for the candidates in flight
+                        bound()
+                        drain = False
+                        continue
                     break
                 (k, name, action), item, saved, future = pending.pop(0)
                 announce(k, name, saved is not None)
