@@ -23,8 +23,9 @@ past inputs (`u2_e`, `u2_e2`, `e_eu`) and of the level of the input and the outp
 (`level`, `branch`, `mean`); dynamics after
 it leave a coloured error correlated with the input (`autocorrelation`,
 `cross_correlation`, `spectrum`). Starts: the polynomial's coefficients regressed on the
-current output's powers, the fold at the lower quantiles of the current output (where a
-sign-blind output touches zero), the dynamics at the identity.
+current output's powers (not tried where they explain less than `_feedback.MIN_EXPLAINED`
+of the residual), the fold at the lower quantiles of the current output (where a
+sign-blind output touches zero), the dynamics at the identity and at two stable pairs.
 """
 
 from __future__ import annotations
@@ -37,6 +38,7 @@ from jaxtyping import Array, Float
 
 from ..._system._simulate import _poles_blocked, _poles_scan
 from ._base import Effect, EffectState, Start, _batched, _repeat, recent, simulate_padded
+from ._feedback import MIN_EXPLAINED, explained
 
 
 def _outputs(model, records):
@@ -74,8 +76,9 @@ class OutputPolynomial(Effect):
         X = np.stack([np.ones_like(y), y**2, y**3], axis=1)
         if not np.all(np.isfinite(X)) or X.shape[0] < 30:
             return []
-        scale = np.sqrt(np.mean(X**2, axis=0)) + 1e-300
-        fit = np.linalg.lstsq(X / scale, r, rcond=None)[0] / scale
+        fit, share = explained(X, r)
+        if share < MIN_EXPLAINED:  # not what the residual shows (`_feedback`)
+            return []
         values = np.array([fit, 0.5 * fit, np.zeros(3)])
         effect = _batched(cls, coefficients=values)
         return [Start(cls.name, model.orders, _repeat(model, len(values)), effect)]
@@ -132,7 +135,9 @@ class OutputDynamics(Effect):
         "q^-1 ..) (a Wiener-Hammerstein sandwich)"
     )
     needs_signature: ClassVar[bool] = True
-    orders: ClassVar[tuple[int, ...]] = (1, 2)
+    # one structure, two poles and two zeros (a first-order filter is its special case):
+    # a candidate costs a refit program per structure
+    orders: ClassVar[tuple[int, ...]] = (2,)
 
     zeros: Float[Array, " m"]  # beta_1 .. beta_m
     poles: Float[Array, " n"]  # alpha_1 .. alpha_n
