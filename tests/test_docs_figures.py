@@ -78,7 +78,7 @@ ALLOWED: list[tuple[str, str]] = [
     (r"99 % band", "the confidence level of the band a residual figure draws"),
     (
         r"99\.9 % of the power [\s\S]{0,80}? below 0\.4/d",
-        "the benchmarks' decimation rule (`_cli._loop.BENCHMARK_DECIMATION`)",
+        "the benchmarks' decimation rule (`_measured._benchmark_protocol.BENCHMARK_DECIMATION`)",
     ),
 ]
 # A space in an entry matches any run of whitespace, a line break too.

@@ -132,3 +132,46 @@ def verdict(
                 "another --decimate."
             )
     return sentences
+
+
+def mean_score(scores: list[RecordScore]) -> RecordScore:
+    """One model's validation figures: its one record's score, or the mean over several
+    (a window applies to one record only; RMSE the root of the mean square)."""
+    if len(scores) == 1:
+        return scores[0]
+    first = scores[0]
+    return RecordScore(
+        first.model,
+        "mean over the validation records",
+        "validation",
+        float(np.mean([s.error for s in scores])),
+        None,
+        float(np.mean([s.error_from_rest for s in scores])),
+        None,
+        first.init_samples,
+        float(np.sqrt(np.mean([s.rmse**2 for s in scores]))),
+    )
+
+
+def stored_window(
+    window: tuple[int, int] | None, record, name: str = "window"
+) -> tuple[int, int] | None:
+    """A scoring window `(start, stop)` in samples of the file as stored (before
+    decimation; a ranged record spec's `Record.file_start` counts from the file's first
+    sample) as samples of the decimated `record`, or None; a `ValueError` naming `name`
+    (the option that gave it) where it leaves the record or holds fewer than 2 samples
+    after decimation."""
+    if window is None:
+        return None
+    decimate, length, offset = record.decimation, len(record), record.file_start
+    start, stop = (int(w) - offset for w in window)
+    first, last = start // decimate, -(-stop // decimate)
+    text = f"{int(window[0])}:{int(window[1])}"
+    if not 0 <= start < stop or last > length:
+        raise ValueError(
+            f"{name} {text}: needs START < STOP within the scored record (file samples "
+            f"{offset} to {offset + length * decimate} as stored)."
+        )
+    if last - first < 2:
+        raise ValueError(f"{name} {text}: fewer than 2 samples after decimation by {decimate}.")
+    return first, last
