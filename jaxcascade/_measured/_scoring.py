@@ -101,13 +101,18 @@ def _rmse(y, simulated) -> float:
 
 
 def verdict(
-    final: list[RecordScore], arx: list[RecordScore], uncovered: frozenset = frozenset()
+    final: list[RecordScore],
+    arx: list[RecordScore],
+    uncovered: frozenset = frozenset(),
+    advice=(),
 ) -> list[str]:
     """One sentence per scored record on which the final model is worse than the mean
     (NRMSE 1) or than the ARX peer, with what the user can try; empty when it is better
     than both everywhere. `uncovered`: the `(record, role)` pairs whose input the
     estimation records do not cover (`_coverage.sentences` flags them): there the miss
-    may be the records', not the structure's, and the sentence says so."""
+    may be the records', not the structure's, and the sentence says so. `advice`: what
+    the records and the residual show (`_advice.advise`), said in place of the generic
+    options where there is any."""
     peers = {(s.record, s.role): s for s in arx}
     sentences = []
     for s in final:
@@ -117,20 +122,26 @@ def verdict(
             worse.append("the mean of the output (NRMSE 1)")
         if peer is not None and s.headline > peer.headline:
             worse.append(f"the linear ARX peer ({peer.headline:.3f})")
-        if worse:
-            where = "window" if s.window_error is not None else "record"
-            cause = (
-                "its structure does not describe this system, or the records do not cover "
-                "the input where it was scored (the report's input coverage)"
-                if (s.record, s.role) in uncovered
-                else "its structure does not describe this system"
-            )
-            sentences.append(
-                f"The final model is worse than {' and '.join(worse)} on the {s.role} "
-                f"{where} {s.record} (NRMSE {s.headline:.3f}): {cause}; try the hysteresis "
-                "effects (--effects), other --orders, more varied estimation records, or "
-                "another --decimate."
-            )
+        if not worse:
+            continue
+        where = "window" if s.window_error is not None else "record"
+        head = (
+            f"The final model is worse than {' and '.join(worse)} on the {s.role} "
+            f"{where} {s.record} (NRMSE {s.headline:.3f})"
+        )
+        if advice:
+            sentences.append(f"{head}. " + " ".join(f"{a.sentence}." for a in advice))
+            continue
+        cause = (
+            "its structure does not describe this system, or the records do not cover "
+            "the input where it was scored (the report's input coverage)"
+            if (s.record, s.role) in uncovered
+            else "its structure does not describe this system"
+        )
+        sentences.append(
+            f"{head}: {cause}; try the hysteresis effects (--effects), other --orders, more "
+            "varied estimation records, or another --decimate."
+        )
     return sentences
 
 

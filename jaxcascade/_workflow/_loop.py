@@ -91,7 +91,10 @@ class LoopRun:
         from .._measured._scoring import verdict
 
         out = verdict(
-            self._by("final model"), self._by("linear ARX"), _coverage.uncovered(self.coverage)
+            self._by("final model"),
+            self._by("linear ARX"),
+            _coverage.uncovered(self.coverage),
+            self.advice,
         )
         if self.arx_unstable_pole is not None:
             out.append(
@@ -102,6 +105,22 @@ class LoopRun:
                 "the loop closed around the output."
             )
         return out
+
+    @property
+    def advice(self) -> list:
+        """What the records and the residual show (`_measured._advice.advise`): said after
+        a poor score in `warnings`."""
+        from .._measured import _coverage
+        from .._measured._advice import advise
+
+        uncovered = sorted({record for record, _ in _coverage.uncovered(self.coverage)})
+        return advise(
+            [r.y_physical for r in self.estimation],
+            integration=self.integrating,
+            unstable_pole=self.arx_unstable_pole,
+            uncovered=uncovered,
+            failed=list(self.result.after.tests.failed),
+        )
 
     @property
     def coverage_sentences(self) -> list[str]:
@@ -162,6 +181,8 @@ class LoopRun:
             for s in self._by("final model", "test")
         ]
         full["verdict"] = self.warnings
+        # what the records show, said in the verdict where the final model scores poorly
+        full["advice"] = [a.to_dict() for a in self.advice] if full["verdict"] else []
         full["coverage"] = {
             "records": [r.to_dict() for r in self.coverage],
             "sentences": self.coverage_sentences,
