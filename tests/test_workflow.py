@@ -169,12 +169,16 @@ def test_model_error_loop_takes_records_with_the_command_s_defaults(tmp_path):
         records.append((100.0 * u, y))
     train = jc.record_from_arrays(*records[0], sample_period=0.1)
     valid = jc.record_from_arrays(*records[1], sample_period=0.1, scaling=train.scaling)
-    result = jc.model_error_loop(train, valid, max_effects=0, base=None)
+    # the declared cascade given, in model units (its robust fit is fit_record's, tested
+    # above): the truth in the records' units mapped by the scaling's factors
+    truth = _physical_truth(100.0, 0.01).to_dict()
+    factor = train.scaling.params_to_physical({name: 1.0 for name in truth})
+    base = jc.CascadeParams.from_dict({k: v / factor[k] for k, v in truth.items()}, jc.Orders())
+    result = jc.model_error_loop(train, valid, max_effects=0, base=base)
     report = result.to_dict()
     assert report["model_after"]["scaling"] == train.scaling.to_dict()
-    assert report["model_after"]["estimates"]["ML1"] == pytest.approx(
-        0.01 * ex.params().to_dict()["ML1"] / 100.0, rel=0.05
-    )
+    estimates = report["model_after"]["estimates"]
+    assert all(estimates[k] == pytest.approx(v, rel=1e-12) for k, v in truth.items())
     assert result.after.error < 0.1 and result.warnings == []
     text = repr(result)
     assert text.startswith("LoopResult('u -> pwl(2,2)") and len(text) < 300
