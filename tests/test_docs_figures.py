@@ -76,6 +76,12 @@ ALLOWED: list[tuple[str, str]] = [
     (r"1-50 % of the input span", "the Prandtl-Ishlinskii operator's threshold grid"),
     (r"\d+-\d+ % and \d+-\d+ % bands", "the quantile bands a figure draws"),
     (r"99 % band", "the confidence level of the band a residual figure draws"),
+    (r"1\.4826 times", "the normal consistency factor of the median absolute deviation"),
+    (r"quantile of 0\.01\b", "the outlier rule's level (`_measured._outliers.ALPHA`)"),
+    (
+        r"neighbours by up to 12 robust scales, but by at most 0\.27",
+        "CED's largest departure (robust scales; output std), why `_outliers` has floors",
+    ),
     (
         r"99\.9 % of the power [\s\S]{0,80}? below 0\.4/d",
         "the benchmarks' decimation rule (`_measured._benchmark_protocol.BENCHMARK_DECIMATION`)",

@@ -98,6 +98,7 @@ def _run_loop(args, checkpoints) -> int:
         retries=args.retries,
         threads=args.threads,
         integrate=args.integrate,
+        outliers=args.outliers,
         checkpoints=checkpoints,
         progress=say,
         command="jaxcascade loop " + " ".join(sys.argv[2:]),
@@ -132,7 +133,7 @@ def _run_loop(args, checkpoints) -> int:
         print(strict_json(run.to_dict(brief=True)))
     else:
         print(summary(run.to_dict(), args.report))
-    for sentence in [*run.warnings, *run.coverage_sentences]:
+    for sentence in [*run.warnings, *run.coverage_sentences, *run.outlier_sentences]:
         print(sentence, file=sys.stderr if args.json else sys.stdout)
     return 0
 

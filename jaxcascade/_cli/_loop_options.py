@@ -165,6 +165,15 @@ def add_parser(subparsers, run) -> None:
         "records (an output that integrates its input, a position under feedback)",
     )
     add(
+        "--outliers",
+        default=d.OUTLIERS,
+        choices=("auto", "keep"),
+        help="auto (the default): find isolated outliers (spikes) of the output in the "
+        "final model's residual, leave those of the estimation and validation records out "
+        "and run the loop again without them; the report names every record's with the "
+        "error with and without them. keep: none looked for",
+    )
+    add(
         "--report",
         metavar="DIR",
         help="folder for the report and figures; the loop keeps its finished fits in "

@@ -61,6 +61,7 @@ def markdown(report: dict, command: str) -> str:
         "out of sample.",
         "",
         *_coverage_lines(report.get("coverage")),
+        *_outlier_lines(report.get("outliers")),
         f"Command: `{command}`",
         "",
         f"- structure before: `{report['structure_before']}`",
@@ -282,6 +283,19 @@ def _backlash_equation(p: dict, degree: int) -> str:
 
 def _error(value) -> str:
     return "-" if value is None else f"{value:.2g}"
+
+
+def _outlier_lines(outliers: dict | None) -> list[str]:
+    """The report's isolated outliers (`_outliers`): one sentence per record that has any."""
+    if not outliers or not outliers.get("records"):
+        return []
+    lines = [
+        "Isolated outliers of the output (a sample farther from the mean of its two "
+        "neighbours than the robust scale of that difference times the normal quantile of "
+        f"{outliers['alpha']:g} / N, at least {outliers['z_min']:g} scales):",
+        "",
+    ]
+    return lines + [f"- {sentence}" for sentence in outliers["sentences"]] + [""]
 
 
 def _final_model_lines(model: dict) -> list[str]:

@@ -46,6 +46,9 @@ class LoopRun:
     - `init_samples`, `init_samples_rule` (the sentence where the default was cut).
     - `window`, `test_windows`: scoring windows in samples of the decimated records.
     - `benchmark`: a benchmark's records and protocol (`loop_benchmark`), or None.
+    - `outliers`: per record with isolated outliers, their samples and sizes and the
+      error with and without them (`_measured._outliers.on_records`); those of the
+      estimation and validation records were left out of the loop's fits and decisions.
     - `warnings`: the sentences where the final model is worse than the mean or the ARX
       peer; `coverage_sentences`: where a record leaves the estimation range.
 
@@ -71,6 +74,7 @@ class LoopRun:
     settings: dict
     command: str
     benchmark: Any = None
+    outliers: list = dataclasses.field(default_factory=list)
 
     @property
     def final(self):
@@ -123,6 +127,12 @@ class LoopRun:
         )
 
     @property
+    def outlier_sentences(self) -> list[str]:
+        from .._measured._outliers import sentences
+
+        return sentences(self.outliers, self.settings.get("outliers") == "auto")
+
+    @property
     def coverage_sentences(self) -> list[str]:
         from .._measured import _coverage
 
@@ -146,6 +156,7 @@ class LoopRun:
         `brief` the command's `--json` (the figures, decisions, tests and models)."""
         from .._measured import _coverage
         from .._measured._benchmark_protocol import benchmark_summary
+        from .._measured._outliers import ALPHA, Z_MIN
         from .._measured._scoring import mean_score
 
         full = self.result.to_dict()
@@ -189,6 +200,13 @@ class LoopRun:
             "outside_limit": _coverage.OUTSIDE,
             "span_limit": _coverage.SPAN,
         }
+        full["outliers"] = {
+            "option": self.settings.get("outliers"),
+            "alpha": ALPHA,
+            "z_min": Z_MIN,
+            "records": self.outliers,
+            "sentences": self.outlier_sentences,
+        }
         a = valid["linear ARX"]
         full["arx"] = {
             "na": self.arx.orders[0],
@@ -219,7 +237,7 @@ class LoopRun:
         keys += ("prediction_error_before", "prediction_error_after", "init_samples")
         keys += ("effect_added", "actions", "structure_before", "structure_after")
         keys += ("significance", "candidates", "residual_tests", "model_before", "model_after")
-        keys += ("test", "verdict", "coverage", "programs_compiled", "integrating")
+        keys += ("test", "verdict", "coverage", "programs_compiled", "integrating", "outliers")
         if self.benchmark is not None:
             keys += ("benchmark",)
         if self.window is not None:
@@ -251,6 +269,8 @@ class LoopRun:
             f"test {s.record} NRMSE {s.headline:.4g}" for s in self._by("final model", "test")
         )
         warned = f"; {len(self.warnings)} warning(s)" if self.warnings else ""
+        spikes = sum(len(row["samples"]) for row in self.outliers)
+        warned += f"; {spikes} isolated outlier(s)" if spikes else ""
         return (
             f"LoopRun({r.final.structure()!r}; added {', '.join(r.added) or 'nothing'}; "
             f"validation NRMSE {r.before.error:.4g} -> {r.after.error:.4g}"
@@ -290,6 +310,7 @@ def loop_records(
     retries: int = _defaults.RETRIES,
     threads: int | None = None,
     integrate: str = _defaults.INTEGRATE,
+    outliers: str = _defaults.OUTLIERS,
     checkpoints=None,
     progress: Callable[[str], None] | None = None,
     command: str | None = None,
@@ -313,6 +334,11 @@ def loop_records(
       a quarter of the shortest scored record; 0 from rest).
     - `integrate`: `"auto"` models an output that integrates its input through its
       difference (`_integrating`), `"yes"` always, `"no"` never.
+    - `outliers`: `"auto"` finds isolated outliers of the estimation and validation
+      records in the final model's residual (`_measured._outliers`), leaves them out (the
+      model's output in their place) and runs the loop again without them; every
+      record's outliers are reported with the error with and without them (`outliers` of
+      `to_dict()`). `"keep"`: none looked for.
     - `checkpoints`: a `_loop_checkpoint.Checkpoints` to keep and resume the loop's work;
       `progress`: a function that takes each progress line; `command`: what the report
       names as the run (default the call).
@@ -331,6 +357,7 @@ def loop_records(
         model_error_loop,
         simulated_output,
     )
+    from .._measured._outliers import find_outliers, impute, on_records
     from .._measured._report import record_name
     from .._measured._scoring import score_record, stored_window
 
@@ -354,6 +381,8 @@ def loop_records(
     validation = [in_scaling(r, scaling) for r in validation]
     test = [in_scaling(r, scaling) for r in test]
     check_sample_periods([*estimation, *validation, *test])
+    if outliers not in ("auto", "keep"):
+        raise ValueError(f"outliers (--outliers) must be auto or keep, got {outliers!r}.")
     if effects is not None:
         effects = _effect_names(effects)
     if window is not None and len(validation) > 1:
@@ -393,32 +422,65 @@ def loop_records(
     # An output that integrates its input (no stable ARX fits it) is modelled through its
     # difference and integrated back for scoring (`_integrating`).
     integrating = integration(estimation, integrate)
-    training, validations = estimation, validation
     if integrating is not None:
-        training = [differenced(r) for r in estimation]
-        validations = [differenced(v) for v in validation]
         say(integrating["sentence"])
-    result = model_error_loop(
-        [r.u for r in training],
-        [r.y for r in training],
-        [v.u for v in validations] if len(validations) > 1 else validations[0].u,
-        [v.y for v in validations] if len(validations) > 1 else validations[0].y,
-        orders,
-        max_effects=max_effects,
-        sample_period=validations[0].sample_period or 1.0,
-        window=window,
-        progress=say,
-        effects=effects,
-        robust=Robust(retries=retries),
-        init_samples=max(init_samples - 1, 0) if integrating else init_samples,
-        integrating=integrating is not None,
-        t_threshold=dm_threshold,
-        min_gain=min_gain,
-        key=jax.random.PRNGKey(seed),
-        checkpoints=checkpoints,
-        threads=default_threads() if threads is None else threads,
-        scaling=scaling,
-    )
+
+    def fit(estimation, validation, store):
+        training, validations = estimation, validation
+        if integrating is not None:
+            training = [differenced(r) for r in estimation]
+            validations = [differenced(v) for v in validation]
+        result = model_error_loop(
+            [r.u for r in training],
+            [r.y for r in training],
+            [v.u for v in validations] if len(validations) > 1 else validations[0].u,
+            [v.y for v in validations] if len(validations) > 1 else validations[0].y,
+            orders,
+            max_effects=max_effects,
+            sample_period=validations[0].sample_period or 1.0,
+            window=window,
+            progress=say,
+            effects=effects,
+            robust=Robust(retries=retries),
+            init_samples=max(init_samples - 1, 0) if integrating else init_samples,
+            integrating=integrating is not None,
+            t_threshold=dm_threshold,
+            min_gain=min_gain,
+            key=jax.random.PRNGKey(seed),
+            checkpoints=store,
+            threads=default_threads() if threads is None else threads,
+            scaling=scaling,
+        )
+        return training, result
+
+    def scorers(model):
+        pair = (
+            lambda u: simulated_output(model, u),
+            lambda u, y, start, n: initialised_output(model, u, y, start, n),
+        )
+        return integrated(*pair) if integrating is not None else pair
+
+    training, result = fit(estimation, validation, checkpoints)
+    # Isolated outliers of the estimation and validation records (`_outliers`): left out
+    # (the model's output in their place) and the loop run again on the records without
+    # them, so that neither a fit nor a decision follows a spike.
+    fitted = [*estimation, *validation]
+    left_out = [None] * len(fitted)  # per record, the outliers the loop left out
+    if outliers == "auto":
+        rest = scorers(result.final)[0]
+        left_out = [find_outliers(r.y - rest(r.u), r.y) for r in fitted]
+        if any(len(o) for o in left_out):
+            count = sum(len(o) for o in left_out)
+            names = [record_name(r) for r, o in zip(fitted, left_out, strict=True) if len(o)]
+            say(
+                f"{count} isolated outlier(s) in {', '.join(names)}: left out, the loop runs "
+                "again without them"
+            )
+            cleaned = [
+                dataclasses.replace(r, y=impute(r.y, rest(r.u), o)) if len(o) else r
+                for r, o in zip(fitted, left_out, strict=True)
+            ]
+            training, result = fit(cleaned[: len(estimation)], cleaned[len(estimation) :], None)
     # The ARX peer is fitted on the estimation records joined end to end.
     arx, unstable = arx_peer(
         np.concatenate([r.u for r in training]), np.concatenate([r.y for r in training])
@@ -441,6 +503,16 @@ def loop_records(
     if integrating is not None:
         # scored as measured, the output integrated back
         models = {name: integrated(*pair) for name, pair in models.items()}
+    outlier_rows = []
+    if outliers == "auto":
+        roles = [("estimation", r) for r in estimation] + [("validation", v) for v in validation]
+        roles += [("test", r) for r in test]
+        outlier_rows = on_records(
+            [(record_name(r), role, r) for role, r in roles],
+            *models["final model"],
+            init_samples=init_samples,
+            found=[*left_out, *([None] * len(test))],
+        )
     scored = [("validation", v, window) for v in validation]
     scored += [("test", r, w) for r, w in zip(test, test_windows, strict=True)]
     scores = [
@@ -471,7 +543,8 @@ def loop_records(
         window=window,
         window_stored=window_stored,
         test_windows=test_windows,
-        settings={"retries": retries, "seed": seed},
+        settings={"retries": retries, "seed": seed, "outliers": outliers},
+        outliers=outlier_rows,
         command=command or "loop_records(...)",
         benchmark=_benchmark,
     )
