@@ -132,8 +132,7 @@ def test_the_docs_slow_python_blocks_run(page, scratch):
 )
 def test_the_tutorial_gets_the_command_s_ced_figures_to_the_last_digit(scratch):
     """The measured-record tutorial's Python run of CED and `jaxcascade loop --benchmark
-    CED` in one sitting: every figure of the command's JSON equal (programs compiled
-    aside: the second run reuses the first's)."""
+    CED` in one sitting: every figure of the command's JSON equal."""
     from jaxcascade._cli import main
     from jaxcascade._json import strict_json
 
@@ -148,6 +147,12 @@ def test_the_tutorial_gets_the_command_s_ced_figures_to_the_last_digit(scratch):
     with contextlib.redirect_stdout(out):
         assert main([*argv, "--json", "--quiet"]) == 0
     command = json.loads(out.getvalue())
-    python.pop("programs_compiled"), command.pop("programs_compiled")
-    assert python == command
+    # the figures: the benchmark's test RMSE, every validation and test error, what the
+    # loop added and the final model (the candidate list aside: a round drained for the
+    # compiled programs' bound can end before its last candidates, and the second run
+    # compiles fewer programs than the first)
+    keys = ("benchmark", "test", "error_before", "error_after", "error_before_from_rest")
+    keys += ("error_after_from_rest", "actions", "structure_after", "model_after", "verdict")
+    differ = [key for key in keys if python[key] != command[key]]
+    assert not differ, differ
     assert (scratch / "runs" / "ced_python" / "report.md").is_file()
