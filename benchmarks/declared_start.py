@@ -63,8 +63,9 @@ def compare(name: str, root: str) -> dict:
     import jax
     import jax.numpy as jnp
 
-    from jaxcascade._cli._loop import DefaultDecimation, _benchmark_records
     from jaxcascade._estimator._robust import Robust
+    from jaxcascade._measured._benchmark_data import benchmark_data
+    from jaxcascade._measured._benchmark_protocol import benchmark_records
     from jaxcascade._measured._effects import plain
     from jaxcascade._measured._effects._base import Effect, Start
     from jaxcascade._measured._integrating import differenced, integrated, integrates
@@ -85,11 +86,9 @@ def compare(name: str, root: str) -> dict:
 
     began = time.perf_counter()
     orders = Orders.parse("2,2,2,2")  # the loop's default
-    options = argparse.Namespace(
-        train=None, validate=None, test=None, data=root, max_samples=5000, benchmark=name,
-        scaling="auto", decimate=DefaultDecimation(1), input=None, output=None,
-    )  # fmt: skip
-    training, validations, tests, bench = _benchmark_records(options, orders)
+    records = benchmark_records(benchmark_data(name, root))  # the command's protocol
+    training, validations, tests = records.estimation, records.validation, records.test
+    bench = records.benchmark
     integrating = integrates(
         np.concatenate([r.u for r in training]), np.concatenate([r.y for r in training])
     )
@@ -118,7 +117,7 @@ def compare(name: str, root: str) -> dict:
     held_out = {}
     for label, model in fits.items():
         validation = validations[0]
-        n = -(-bench.n_init // options.decimate)
+        n = records.init_samples  # n_init in samples after decimation
         judged = validation if integrating is None else differenced(validation)
         held_out[f"{label}_validation_nrmse"] = evaluate(
             model,

@@ -73,7 +73,9 @@ def main(argv=None) -> int:
             u, y = undeclared_record(model, k_est, args.n, args.snr, ar)
             u_val, y_val = undeclared_record(model, k_val, args.n, args.snr, ar)
         start = time.perf_counter()
-        result = jc.model_error_loop(u, y, u_val, y_val, jc.Orders(), integrating=integrating)
+        result = jc.model_error_loop(
+            u, y, u_val, y_val, jc.Orders(), integrating=integrating, init_samples=0
+        )
         rows.append(
             {
                 "effect_present": label,

@@ -72,7 +72,7 @@ def main(argv=None) -> int:
             u, y = undeclared_record(model, k_est, n, args.snr, ar)
             u_val, y_val = undeclared_record(model, k_val, n, args.snr, ar)
             began = time.perf_counter()
-            result = jc.model_error_loop(u, y, u_val, y_val, jc.Orders())
+            result = jc.model_error_loop(u, y, u_val, y_val, jc.Orders(), init_samples=0)
             rows.append(
                 {
                     "n": n,

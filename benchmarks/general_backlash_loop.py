@@ -78,7 +78,7 @@ def main(argv=None) -> int:
                 np.std(clean - np.asarray(simulate_extended(straight, u_val))) / np.std(clean)
             )
             began = time.perf_counter()
-            result = jc.model_error_loop(u, y, u_val, y_val, orders)
+            result = jc.model_error_loop(u, y, u_val, y_val, orders, init_samples=0)
             expected = ["general_backlash"] if name in CURVED else []
             nd = backlash_of(result.final)
             rows.append(

@@ -90,6 +90,10 @@ effects_loop() {  # issue 5: the loop on records with one undeclared effect each
     python benchmarks/effects_loop.py --out results/effects_loop --seed 1
     python benchmarks/false_additions.py --seeds 50 --n 1024,2000 --out results/false_additions
 }
+outliers() {  # issue 68, item 5: isolated outliers on clean records (false alarms, 500
+    # seeds) and on records with four spikes (the estimates against the clean record's)
+    python benchmarks/outliers.py --seeds 500 --spiked 10 --out results/outliers
+}
 loop() {  # issue 21 (needs ../shared/data): the loop on the measured friction-damper
     # records; brfd.py runs every loop again, so old reports go first
     rm -rf results/brfd
@@ -214,7 +218,7 @@ gpu() {  # issue 69: literal, robust, recursive and the 12-cell sweep on a GPU a
     # (tests/test_results_listing.py holds the table's files to the tracked ones)
     bash benchmarks/gpu.sh
 }
-all=(bench profile bench_robust speed speed_damper distributed robust sweeps literal efficiency effects_loop loop
+all=(bench profile bench_robust speed speed_damper distributed robust sweeps literal efficiency effects_loop outliers loop
     stability backlash reproduce recursive inputs noise nonlinear stand_ins declared statuses general general_brfd
     slow_tests default_tests profile_tests mutations)
 needs() {  # whether step $1 reads ../shared/data

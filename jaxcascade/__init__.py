@@ -44,6 +44,12 @@ On-line identification and systems that change
     with it); `tracking`, `Tracking` (the tracking study of one change),
     `tracking_summary` and `plot_tracking` (re-entry, steady RMSE and the median error
     trajectory of a sweep with `[system.change]`).
+Every measured-data command as one call (the command's defaults, a result object with
+    the status and warnings the command prints, `to_dict()`, the command's JSON)
+    `fit_record` -> `FitResult` (`jaxcascade fit`: estimates and standard errors in the
+    record's units); `loop_records`, `loop_benchmark` -> `LoopRun` (`jaxcascade loop`,
+    on records or on a benchmark by name and root; `report(folder)` writes what `--report`
+    writes); `simulate_model` -> `Simulation` (`jaxcascade simulate`).
 Measured data and the model-error loop
     `read_record`, `record_from_arrays`, `split_record`, `Record`, `Scaling`;
     `residual_tests`, `ResidualTests`, `regime_from_switches`, `plot_residual_tests`,
@@ -149,6 +155,19 @@ _MODULES = {
     "._measured._model_file": (
         "SavedModel",
         "load_model",
+    ),
+    "._workflow._fit": (
+        "FitResult",
+        "fit_record",
+    ),
+    "._workflow._loop": (
+        "LoopRun",
+        "loop_benchmark",
+        "loop_records",
+    ),
+    "._workflow._simulate": (
+        "Simulation",
+        "simulate_model",
     ),
     "._metrics": (
         "fit_percent",

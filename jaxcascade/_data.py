@@ -143,7 +143,9 @@ class Scaling:
         """Map parameters named as in `Orders.names` from model to physical units.
 
         The physical model is `y - y_offset = cascade(u - u_offset)` (offsets are not
-        parameters of the cascade, whose NS passes through zero).
+        parameters of the cascade, whose NS passes through zero). The curved branches'
+        terms `mL_i`, `mR_i` (`i >= 2`, a general backlash) multiply the `i`-th power of
+        a signal in output units: they scale by `y_scale ** (1 - i)`.
         """
         factors = {
             "MR": self.y_scale / self.u_scale,
@@ -158,14 +160,17 @@ class Scaling:
         }
         out = {}
         for name, value in values.items():
-            match = re.fullmatch(r"(MR|ML|DR|DL|a|b)\d*|(mR|cL|cR)", name)
+            match = re.fullmatch(r"(MR|ML|DR|DL|a|b)\d*|(mR|cL|cR)|(?:mL|mR)(\d+)", name)
             if match is None:
                 raise ValueError(
                     f"Unknown parameter name {name!r}; expected names such as MR1, DL1, a2, "
-                    "b1, cL, mR, cR (see Orders.names)."
+                    "b1, cL, mR, cR, mL2 (see Orders.names)."
                 )
-            key = match.group(1) or match.group(2)
-            out[name] = np.asarray(value, dtype=np.float64) * factors[key]
+            if match.group(3) is not None:  # a curved branch's term of power i
+                factor = self.y_scale ** (1 - int(match.group(3)))
+            else:
+                factor = factors[match.group(1) or match.group(2)]
+            out[name] = np.asarray(value, dtype=np.float64) * factor
             if np.ndim(out[name]) == 0:
                 out[name] = float(out[name])
         return out
@@ -465,6 +470,45 @@ def check_sample_periods(records) -> None:
                 "must share a sample period, so resample one of them or correct its time "
                 "column or sample period."
             )
+
+
+def in_scaling(record: Record, scaling: Scaling) -> Record:
+    """`record` in `scaling`, mapped through its physical units (itself where it is in
+    that scaling already)."""
+    if record.scaling == scaling:
+        return record
+    return dataclasses.replace(
+        record,
+        u=scaling.input_to_model(record.u_physical),
+        y=scaling.output_to_model(record.y_physical),
+        scaling=scaling,
+    )
+
+
+def joint_scaling(records, method: str = _defaults.SCALING) -> list[Record]:
+    """`records` (estimated jointly) in one scaling, `Scaling.from_data` of their
+    physical input and output joined end to end by `method`."""
+    scaling = Scaling.from_data(
+        np.concatenate([r.u_physical for r in records]),
+        np.concatenate([r.y_physical for r in records]),
+        method,
+    )
+    return [in_scaling(r, scaling) for r in records]
+
+
+def read_jointly(
+    estimation, validation=(), test=(), *, scaling=_defaults.SCALING, **options
+) -> tuple[list[Record], list[Record], list[Record]]:
+    """Estimation, validation and test records of one model from record specs
+    (`read_record`, `options` its settings), all in the estimation records' joint
+    scaling (`joint_scaling`), of one sample period (`check_sample_periods`)."""
+    raw = [read_record(spec, **options, scaling="none") for spec in estimation]
+    training = joint_scaling(raw, scaling)
+    common = training[0].scaling
+    validations = [read_record(spec, **options, scaling=common) for spec in validation]
+    tests = [read_record(spec, **options, scaling=common) for spec in test]
+    check_sample_periods([*training, *validations, *tests])
+    return training, validations, tests
 
 
 def read_column(

@@ -332,7 +332,7 @@ def test_fit_exits_3_on_a_failed_fit_with_strict_json(capsys, tmp_path):
     result = _strict(captured.out)
     status = Status[result["status"]]
     assert status.failure and result["message"] == status.message
-    assert all(math.isfinite(value) for value in result["estimates"].values())
+    assert all(math.isfinite(value) for value in result["model"]["estimates"].values())
 
 
 @pytest.mark.parametrize("column", ["u", "y"])
@@ -471,7 +471,7 @@ def test_loop_threads_below_one_is_refused_before_reading(capsys, tmp_path):
     missing = str(tmp_path / "missing.csv")  # never read: the option is refused first
     loop = ["loop", missing, "--validate", missing, "--input", "u", "--output", "y"]
     err = _one_line_error(capsys, [*loop, "--threads", "0"])
-    assert err.endswith("--threads must be an integer >= 1, got 0.")
+    assert err.endswith("threads (--threads) must be >= 1, got 0.")
 
 
 @pytest.mark.parametrize("command", ["reproduce", "sweep", "fit", "loop", "bench"])

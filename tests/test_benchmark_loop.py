@@ -8,7 +8,11 @@ import numpy as np
 import pytest
 
 from jaxcascade._cli import main
-from jaxcascade._cli._loop import band_edge, benchmark_decimation, benchmark_split
+from jaxcascade._measured._benchmark_protocol import (
+    band_edge,
+    benchmark_decimation,
+    benchmark_split,
+)
 
 ROOT = pathlib.Path(__file__).resolve().parents[2] / "shared" / "data" / "nonlinear_benchmarks"
 needs_data = pytest.mark.skipif(
@@ -64,18 +68,26 @@ def test_emps_is_decimated_by_the_rule_unless_decimate_is_given():
     # EMPS: 24,841 training samples at 1 kHz, a position whose input's band ends far
     # below the Nyquist frequency; the rule's factor is ceil(24841 / 5000) = 5, and a
     # given --decimate (1 too) is taken as given
-    from jaxcascade._cli import build_parser
-    from jaxcascade._cli._loop import _benchmark_records
-    from jaxcascade._system._model import Orders
+    from jaxcascade import benchmark_data
+    from jaxcascade._measured._benchmark_protocol import benchmark_records
 
-    for extra, factor, estimation in (([], 5, 3727), (["--decimate", "1"], 1, 5000)):
-        argv = ["loop", "--benchmark", "EMPS", "--data", str(ROOT), *extra]
-        args = build_parser().parse_args(argv)
-        training, validations, tests, _ = _benchmark_records(args, Orders())
-        assert args.decimate == factor
-        assert args.decimation_rule.startswith("by the rule" if not extra else "--decimate")
-        assert sum(len(r.u) for r in training) == estimation
-        assert all(r.decimation == factor for r in [*training, *validations, *tests])
+    bench = benchmark_data("EMPS", ROOT)
+    for decimate, factor, estimation in ((None, 5, 3727), (1, 1, 5000)):
+        records = benchmark_records(bench, decimate=decimate)
+        assert records.decimation == factor
+        assert records.decimation_rule.startswith("by the rule" if decimate is None else "--")
+        assert sum(len(r.u) for r in records.estimation) == estimation
+        found = [*records.estimation, *records.validation, *records.test]
+        assert all(r.decimation == factor for r in found)
+        assert records.init_samples == -(-bench.n_init // factor)
+    # the command takes a given --decimate (1 too) as given, the rule without it
+    from jaxcascade._cli import build_parser
+    from jaxcascade._cli._loop_options import DefaultDecimation
+
+    args = build_parser().parse_args(["loop", "--benchmark", "EMPS", "--data", str(ROOT)])
+    assert type(args.decimate) is DefaultDecimation
+    given = ["loop", "--benchmark", "EMPS", "--data", str(ROOT), "--decimate", "1"]
+    assert type(build_parser().parse_args(given).decimate) is int
 
 
 def test_split_drops_whole_early_records_past_the_budget():

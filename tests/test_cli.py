@@ -94,24 +94,26 @@ def test_fit_json_on_a_simulated_record(capsys, tmp_path):
     pd.DataFrame({"u": np.asarray(u), "y": np.asarray(y)}).to_csv(path, index=False)
     assert main(["fit", str(path), "--input", "u", "--output", "y", "--json"]) == 0
     result = json.loads(capsys.readouterr().out)
-    keys = {"estimator", "status", "message", "estimates", "std_errors", "nrmse", "iterations"}
-    # fitted in model units (the measured-data default `--scaling auto`), mapped back
-    keys |= {"estimates_physical", "std_errors_physical", "scaling"}
-    assert set(result) == keys | {"not_identifiable"}
+    keys = {"estimator", "status", "message", "warnings", "nrmse", "iterations", "samples"}
+    assert set(result) == keys | {"not_identifiable", "model"}
     assert result["estimator"] == "robust" and result["status"] == "converged"
-    assert result["scaling"]["method"] == "scale"  # the input crosses zero: not centred
-    assert result["not_identifiable"] == {}  # the input covers every breakpoint
+    model = result["model"]  # the package's one schema (docs/models.md)
+    # fitted in model units (the measured-data default `--scaling auto`), reported in the
+    # record's
+    assert model["scaling"]["method"] == "scale"  # the input crosses zero: not centred
+    assert result["not_identifiable"] == {} and result["warnings"] == []
     # SNR 50: the noise floor of the NRMSE is 1/50; a correct fit sits near it.
     assert result["nrmse"] < 1.3 / 50
     truth = ex.params().to_dict()
-    estimates = result["estimates_physical"]
+    estimates = model["estimates"]
     assert max(abs(estimates[k] - v) for k, v in truth.items()) < 0.05
     # a standard error beside every estimate, of the size of the estimation error: at
     # SNR 50 and N 1500 between 1e-4 and 1e-2, and no error beyond 6 of them
-    errors = result["std_errors_physical"]
+    errors = model["std_errors"]
     assert set(errors) == set(truth)
     assert all(1e-4 < errors[k] < 1e-2 for k in truth)
     assert max(abs(estimates[k] - v) / errors[k] for k, v in truth.items()) < 6
+    assert set(model["estimates_model_units"]) == set(truth)
 
 
 def test_fit_says_which_parameters_the_record_does_not_determine(capsys, tmp_path):
@@ -237,10 +239,13 @@ def test_loop_on_several_records_with_a_window(capsys, tmp_path):
     full = json.loads((tmp_path / "report" / "report.json").read_text())
     assert len(full["records"]["estimation"]) == 2
     assert full["window"]["model_samples"] == [100, 400]
-    # standard errors of the final model on both estimation records, one per parameter
-    errors = result["standard_errors_after"]
-    assert errors == full["standard_errors_after"]
-    assert set(errors) == set(jc.Orders().names) and all(e > 0 for e in errors.values())
+    # standard errors of the final model on both estimation records, one per parameter,
+    # in the schema (the records' units and model units)
+    model = result["model_after"]
+    assert model == full["model_after"]
+    for key in ("std_errors", "std_errors_model_units"):
+        errors = model[key]
+        assert set(errors) == set(jc.Orders().names) and all(e > 0 for e in errors.values())
     report = (tmp_path / "report" / "report.md").read_text()
     assert "better than the mean of the output" in report and "r4.csv | test" in report
     assert "Input coverage" in report and "| r3.csv | validation | 600 |" in report

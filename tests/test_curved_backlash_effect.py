@@ -126,7 +126,9 @@ def test_the_loop_adds_curved_branches_where_the_record_has_them():
     k_est, k_val = jax.random.split(jax.random.PRNGKey(1))
     u, y = undeclared_record(model, k_est, 1024, 25.0)
     u_val, y_val = undeclared_record(model, k_val, 1024, 25.0)
-    result = jc.model_error_loop(u, y, u_val, y_val, orders, effects=("general_backlash",))
+    result = jc.model_error_loop(
+        u, y, u_val, y_val, orders, effects=("general_backlash",), init_samples=0
+    )
     assert result.added == ["general_backlash"]
     assert set(result.before.tests.failed) & set(CurvedBacklash.signature)
     assert result.after.error < 1.15 / 25 < result.before.error

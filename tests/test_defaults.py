@@ -11,8 +11,10 @@ import pytest
 
 from jaxcascade import _defaults
 from jaxcascade._cli import build_parser
-from jaxcascade._cli._fit import fit_record
 from jaxcascade._data import read_record, record_from_arrays
+from jaxcascade._measured._loop import model_error_loop
+from jaxcascade._workflow._fit import fit_record
+from jaxcascade._workflow._loop import loop_benchmark, loop_records
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 
@@ -40,7 +42,39 @@ def test_the_api_takes_the_same_defaults():
         assert parameters["scaling"].default == _defaults.SCALING
         assert parameters["detrend"].default == _defaults.DETREND
         assert parameters["decimate"].default == _defaults.DECIMATE
-    assert inspect.signature(fit_record).parameters["name"].default == _defaults.ESTIMATOR
+    parameters = inspect.signature(fit_record).parameters
+    assert parameters["estimator"].default == _defaults.ESTIMATOR
+    assert parameters["orders"].default == _defaults.ORDERS
+    assert parameters["scaling"].default == _defaults.SCALING
+
+
+def test_the_loop_takes_the_command_s_defaults_in_python():
+    """`jaxcascade loop`, `loop_records`, `loop_benchmark` and `model_error_loop`: one
+    table (`_defaults`), the option's default equal to the argument's (issue 68)."""
+    args = build_parser().parse_args(["loop", "a.csv", "--validate", "b.csv"])
+    call = inspect.signature(loop_records).parameters
+    engine = inspect.signature(model_error_loop.__wrapped__).parameters
+    pairs = {
+        "max_effects": "max_effects",
+        "dm_threshold": "dm_threshold",
+        "min_gain": "min_gain",
+        "seed": "seed",
+        "retries": "retries",
+        "threads": "threads",
+        "init_samples": "init_samples",
+        "integrate": "integrate",
+    }
+    for option, argument in pairs.items():
+        assert getattr(args, option) == call[argument].default, option
+    assert args.orders == call["orders"].default == _defaults.ORDERS
+    # the engine: the same rule for the window (None: the command's) and the threads
+    assert engine["init_samples"].default is None and engine["threads"].default is None
+    assert engine["max_effects"].default == args.max_effects
+    assert engine["t_threshold"].default == args.dm_threshold
+    assert engine["min_gain"].default == args.min_gain
+    bench = inspect.signature(loop_benchmark).parameters
+    args = build_parser().parse_args(["loop", "--benchmark", "CED", "--data", "."])
+    assert args.max_samples == bench["max_samples"].default == _defaults.MAX_SAMPLES
 
 
 def test_the_paper_commands_keep_the_paper_estimator():

@@ -76,9 +76,15 @@ ALLOWED: list[tuple[str, str]] = [
     (r"1-50 % of the input span", "the Prandtl-Ishlinskii operator's threshold grid"),
     (r"\d+-\d+ % and \d+-\d+ % bands", "the quantile bands a figure draws"),
     (r"99 % band", "the confidence level of the band a residual figure draws"),
+    (r"1\.4826 times", "the normal consistency factor of the median absolute deviation"),
+    (r"quantile of 0\.01\b", "the outlier rule's level (`_measured._outliers.ALPHA`)"),
+    (
+        r"neighbours by up to 12 robust scales, but by at most 0\.27",
+        "CED's largest departure (robust scales; output std), why `_outliers` has floors",
+    ),
     (
         r"99\.9 % of the power [\s\S]{0,80}? below 0\.4/d",
-        "the benchmarks' decimation rule (`_cli._loop.BENCHMARK_DECIMATION`)",
+        "the benchmarks' decimation rule (`_measured._benchmark_protocol.BENCHMARK_DECIMATION`)",
     ),
 ]
 # A space in an entry matches any run of whitespace, a line break too.
@@ -97,6 +103,26 @@ def _false_additions(match: re.Match[str]) -> list[tuple[str, str]]:
     return pairs
 
 
+def _outliers(match: re.Match[str]) -> list[tuple[str, str]]:
+    """(in the page, in the file) for the README's outlier figures."""
+    import pandas as pd
+
+    table = pd.read_csv(ROOT / "results" / "outliers.csv")
+    clean = table[table["record"] == "clean"]
+    named = clean[["named_estimation", "named_validation"]].notna().any(axis=1)
+    spiked = table[table["record"] == "spiked"]
+    auto = spiked[spiked["outliers_option"] == "auto"]
+    keep = spiked[spiked["outliers_option"] == "keep"]
+    found = int((auto["named_estimation"] == "150,300,451,820").sum())
+    shift, kept = auto["largest_shift_in_std_errors"], keep["largest_shift_in_std_errors"]
+    return [
+        (match.group("alarms"), f"{int(named.sum())} of {len(clean)}"),
+        (match.group("found"), f"{found} of {len(auto)}"),
+        (match.group("shift"), f"{shift.max():.2f}"),
+        (match.group("kept"), f"{kept.min():.1f} to {kept.max():.1f}"),
+    ]
+
+
 # Figures a page may quote because a test reads them back from their results file: the
 # page, the phrase (named groups hold the figures) and what the file says.
 VERIFIED = [
@@ -105,6 +131,14 @@ VERIFIED = [
         r"false additions: (?P<n1024>\d+ of \d+) records at N = 1024 and "
         r"(?P<n2000>\d+ of \d+) at N = 2000",
         _false_additions,
+    ),
+    (
+        "README.md",
+        r"named outliers on (?P<alarms>\d+ of \d+) records; on ten of them with four spikes of "
+        r"5 to 6 output standard deviations it named all four on (?P<found>\d+ of \d+), and "
+        r"no estimate moved by more than (?P<shift>[\d.]+) of the clean fit's standard errors "
+        r"\(with the spikes kept: (?P<kept>[\d.]+ to [\d.]+)\)",
+        _outliers,
     ),
 ]
 

@@ -59,7 +59,7 @@ def _undeclared(effect):
 )
 def test_loop_names_the_undeclared_effect(effect):
     u, y, u_val, y_val = _undeclared(effect)
-    result = model_error_loop(u, y, u_val, y_val, jc.Orders())
+    result = model_error_loop(u, y, u_val, y_val, jc.Orders(), init_samples=0)
     _check_named(effect, result)
 
 
@@ -69,7 +69,7 @@ def test_loop_names_the_undeclared_effect_among_rivals(effect):
     # rivals (the full library: the slow set and results/effects_loop.md).
     u, y, u_val, y_val = _undeclared(effect)
     library = (effect, *(r for r in RIVALS if r != effect))
-    result = model_error_loop(u, y, u_val, y_val, jc.Orders(), effects=library)
+    result = model_error_loop(u, y, u_val, y_val, jc.Orders(), effects=library, init_samples=0)
     _check_named(effect, result)
 
 
@@ -113,9 +113,10 @@ def _check_named(effect, result):
     # the final model's standard errors, on the estimation record: every cascade
     # parameter has one, finite and positive; without an undeclared effect the estimate
     # lies within 5 of them of the truth, parameter by parameter
-    errors = report["standard_errors_after"]
+    errors = report["model_after"]["std_errors_model_units"]
     names = result.final.orders.names
     assert all(np.isfinite(errors[name]) and errors[name] > 0 for name in names)
+    assert errors == {n: result.standard_errors[n] for n in errors}
     if effect is None:
         estimate, truth = result.final.params.to_dict(), TRUTH().to_dict()
         assert all(abs(estimate[n] - truth[n]) <= 5 * errors[n] for n in names)
@@ -137,7 +138,7 @@ def test_loop_names_strongly_coloured_noise_on_the_prediction_error(library):
     model = plain(TRUTH())
     u, y = undeclared_record(model, jax.random.PRNGKey(1), N, SNR, 0.95)
     u_val, y_val = undeclared_record(model, jax.random.PRNGKey(2), N, SNR, 0.95)
-    result = model_error_loop(u, y, u_val, y_val, jc.Orders(), effects=library)
+    result = model_error_loop(u, y, u_val, y_val, jc.Orders(), effects=library, init_samples=0)
     assert result.added == ["colored_noise"]
     report = result.to_dict()
     assert report["effect_added"] == ["colored_noise"]
@@ -274,6 +275,7 @@ def test_loop_compiles_a_bounded_set_of_programs():
             base=base,
             effects=("output_offset",),
             max_effects=1,
+            init_samples=0,
         )
         assert result.added == ["output_offset"]
         counts.append(compile_count() - before)
@@ -301,7 +303,15 @@ def test_threads_give_the_loop_of_one_thread_bit_for_bit(monkeypatch):
     for threads in (1, 4):
         monkeypatch.setattr(_loop, "_fit_candidate", fit_in)
         result = model_error_loop(
-            u, y, u_val, y_val, jc.Orders(), base=TRUTH(), effects=library, threads=threads
+            u,
+            y,
+            u_val,
+            y_val,
+            jc.Orders(),
+            base=TRUTH(),
+            effects=library,
+            threads=threads,
+            init_samples=0,
         )
         report = result.to_dict()
         report.pop("programs_compiled")
@@ -339,7 +349,13 @@ def test_loop_replaces_the_cascade_by_a_hysteresis_path():
 
     (u1, y1), (u2, y2), (u_val, y_val) = record(1500, 0.5), record(1500, 0.3), record(1500, 0.4)
     result = model_error_loop(
-        [u1, u2], [y1, y2], u_val, y_val, jc.Orders(), effects=("backlash_friction",)
+        [u1, u2],
+        [y1, y2],
+        u_val,
+        y_val,
+        jc.Orders(),
+        effects=("backlash_friction",),
+        init_samples=0,
     )
     assert result.actions[0] == {"effect": "backlash_friction", "action": "replace", "round": 1}
     assert not result.final.cascade

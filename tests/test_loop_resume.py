@@ -64,15 +64,16 @@ def _same_results(a: dict, b: dict) -> None:
         assert a[key] == pytest.approx(b[key], rel=1e-12, abs=0)
     for model in ("model_before", "model_after"):
         assert a[model].keys() == b[model].keys()
-        np.testing.assert_allclose(
-            list(a[model]["cascade"].values()), list(b[model]["cascade"].values()), rtol=1e-12
-        )
-        for name in a[model]:
-            if name not in ("cascade", "orders"):
-                assert a[model][name] == pytest.approx(b[model][name], rel=1e-12)
-    errors_a, errors_b = a["standard_errors_after"], b["standard_errors_after"]
-    assert errors_a.keys() == errors_b.keys()
-    np.testing.assert_allclose(list(errors_a.values()), list(errors_b.values()), rtol=1e-12)
+        assert a[model]["structure"] == b[model]["structure"]
+        for key in ("estimates", "estimates_model_units", "std_errors_model_units"):
+            assert a[model][key].keys() == b[model][key].keys()
+            # a model without standard errors (the declared cascade's): None, NaN here
+            values = [np.array(list(m[model][key].values()), float) for m in (a, b)]
+            np.testing.assert_allclose(*values, rtol=1e-12)
+        for x, y in zip(a[model]["effects"], b[model]["effects"], strict=True):
+            assert x["name"] == y["name"]
+            for field, value in x["parameters_model_units"].items():
+                assert value == pytest.approx(y["parameters_model_units"][field], rel=1e-12)
     labels = ("round", "name", "variant", "action", "significant")
     assert [[c[k] for k in labels] for c in a["candidates"]] == [
         [c[k] for k in labels] for c in b["candidates"]

@@ -56,8 +56,11 @@ def test_simulate_reproduces_the_loops_test_figures(loop, capsys):
     folder, test, result = loop
     model = folder / "report" / "model.json"
     saved = json.loads(model.read_text())
-    assert saved["structure"] == result["structure_after"]
-    assert saved["model"]["parameters"] == result_model(folder)["cascade"]
+    # the model in the one schema of report.json and --json (issue 68), with a format
+    # version
+    assert saved["format_version"] == 2
+    assert saved["model"]["structure"] == result["structure_after"]
+    assert saved["model"] == result_model(folder) == result["model_after"]
     assert saved["data"]["sample_period"] == pytest.approx(PERIOD)
     assert saved["data"]["output"]["unit"] == "mm"
     assert saved["scoring"]["init_samples"] == 30
@@ -124,11 +127,11 @@ def test_bad_model_file_and_other_sample_period_are_one_line_exit_2(loop, capsys
     bad.write_text(json.dumps(data))
     one_line(["simulate", str(bad), test], "format version 99")
     data = json.loads(model.read_text())
-    data["model"]["effects"] = [{"name": "no_such_effect", "parameters": {}}]
+    data["model"]["effects"] = [{"name": "no_such_effect", "parameters_model_units": {}}]
     bad.write_text(json.dumps(data))
     one_line(["simulate", str(bad), test], "no_such_effect")
     data = json.loads(model.read_text())
-    del data["model"]["parameters"]["MR1"]
+    del data["model"]["estimates_model_units"]["MR1"]
     bad.write_text(json.dumps(data))
     one_line(["simulate", str(bad), test], "MR1")
     slow = _record(tmp_path / "slow.csv", 3, 300, period=2 * PERIOD)
@@ -144,7 +147,8 @@ def test_fit_saves_a_model_that_simulate_applies(loop, tmp_path, capsys):
     assert main([*argv, "--save-model", str(path), "--json"]) == 0
     fitted = json.loads(capsys.readouterr().out)
     saved = jc.load_model(path)
-    assert saved.model.params.to_dict() == fitted["estimates"]
+    assert saved.model.params.to_dict() == fitted["model"]["estimates_model_units"]
+    assert saved.to_dict()["model"] == fitted["model"]  # one schema, the file's and fit's
     assert saved.sample_period == pytest.approx(PERIOD) and saved.model.effects == ()
     # the record the cascade was fitted on, from rest: fit's own free-run NRMSE
     assert main(["simulate", str(path), record, "--json"]) == 0
@@ -222,14 +226,13 @@ def test_the_loop_report_draws_every_record_in_its_unit_against_seconds(loop):
     # the final model's equations and every estimate with its standard error, in the
     # model's units and the records' (issue 38.5)
     full = json.loads((report / "report.json").read_text())
-    final = full["final_model"]
-    names = [row["name"] for row in final["parameters"]]
-    assert set(full["standard_errors_after"]) == set(names)
+    model = full["model_after"]
+    assert set(model["std_errors"]) == set(model["estimates"]) == set(jc.Orders().names)
     section = text.split("## The final model", 1)[1].split("## ", 1)[0]
     assert all(f"\n- {block} (" in section for block in ("NS", "LD", "ND"))
     assert "x(t) = v(t-1) " in section  # a1 = 1, the paper's normalisation
-    for row in final["parameters"]:
-        assert f"| {row['name']} | {row['estimate']:.6g} |" in section
+    for name, value in model["estimates"].items():  # in the records' units first
+        assert f"| {name} | {value:.6g} |" in section
     # the figure's axes: the unit and seconds
     from jaxcascade._plot._comparison import plot_comparison
 

@@ -288,7 +288,7 @@ def test_loop_reads_ced_by_specs_without_input_and_output(capsys):
     argv += ["--validate", spec("u12,z12", "300:400")]
     argv += ["--test", spec("u11,z11", "400:500"), spec("u12,z12", "400:500"), "--ts", "0.02"]
     argv += ["--validate", spec("u11,z11", "400:500")]  # a second validation record
-    training, validations, tests = _file_records(build_parser().parse_args(argv), None)
+    training, validations, tests = _file_records(build_parser().parse_args(argv))
     assert [len(r) for r in training] == [400, 300] and [len(v) for v in validations] == [
         100,
         100,
@@ -337,4 +337,4 @@ def test_fit_on_a_range_of_a_mat_file(capsys, tmp_path):
     result = json.loads(capsys.readouterr().out)
     assert result["status"] in ("converged", "cycled") and result["nrmse"] < 1.3 / 50
     truth = ex.params().to_dict()
-    assert max(abs(result["estimates"][k] - v) for k, v in truth.items()) < 0.05
+    assert max(abs(result["model"]["estimates"][k] - v) for k, v in truth.items()) < 0.05

@@ -82,7 +82,7 @@ def test_the_loop_reads_records_of_several_files_and_formats_together():
     argv = ["loop", f"{harmonic}:{signals}", f"{quake}:{signals}:0:4000"]
     argv += ["--validate", f"{quake}:{signals}:4000:6000", "--time", "time_s"]
     argv += ["--test", f"{quake}:{signals}:6000:8000"]
-    training, validations, tests = _file_records(build_parser().parse_args(argv), None)
+    training, validations, tests = _file_records(build_parser().parse_args(argv))
     records = [*training, *validations, *tests]
     assert len({r.scaling for r in records}) == 1
     assert all(r.sample_period == pytest.approx(1 / 1024, rel=1e-3) for r in records)

@@ -1,14 +1,16 @@
 """What the commands share: the one-line error, options that read a record, parsers of
-option values, and the check that an output folder can be written."""
+option values, and the check that an output folder can be written (`strict_json`, the
+package's JSON writer, re-exported from `_json`)."""
 
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
 import pathlib
 import tempfile
+
+from .._json import strict_json as strict_json
 
 
 class CLIError(Exception):
@@ -238,22 +240,3 @@ def writable_folder(path, option: str = "--out") -> None:
         ) from None
     if not os.access(folder, os.W_OK):
         raise CLIError(f"cannot write to folder '{folder}'; choose another with {option}.")
-
-
-def strict_json(value, **options) -> str:
-    """`value` as strict JSON: NaN and infinities become `null` (JSON has no such
-    numbers; the record's status or message says why), NumPy scalars and arrays plain
-    numbers and lists."""
-    return json.dumps(_finite_or_null(value), allow_nan=False, **options)
-
-
-def _finite_or_null(value):
-    if isinstance(value, dict):
-        return {key: _finite_or_null(item) for key, item in value.items()}
-    if isinstance(value, list | tuple):
-        return [_finite_or_null(item) for item in value]
-    if hasattr(value, "tolist") and not isinstance(value, str):  # NumPy scalars, arrays
-        return _finite_or_null(value.tolist())
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value

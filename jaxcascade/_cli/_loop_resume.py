@@ -87,7 +87,9 @@ def _interrupted(args, checkpoints) -> int:
     )
     try:
         report.mkdir(parents=True, exist_ok=True)
-        (report / "report.md").write_text(_markdown(sentence, finished, command))
+        from .._measured._report import interrupted_markdown
+
+        (report / "report.md").write_text(interrupted_markdown(sentence, finished, command))
         summary = {
             "interrupted": True,
             "stopped": checkpoints.where,
@@ -100,26 +102,3 @@ def _interrupted(args, checkpoints) -> int:
         pass  # the checkpoints are what matters; the sentence below still says how
     print(f"jaxcascade: {sentence} Continue with: {command}", file=sys.stderr)
     return INTERRUPTED
-
-
-def _markdown(sentence: str, finished: list[dict], command: str) -> str:
-    lines = ["# Model-error loop report: interrupted", "", sentence, ""]
-    lines += ["Continue it (finished fits are loaded, not refitted) with:", ""]
-    lines += [f"    {command}", ""]
-    if finished:
-        lines += [
-            "| finished | round | model | NRMSE | DM | significant |",
-            "|---|---|---|---|---|---|",
-        ]
-        for item in finished:
-            lines.append(
-                f"| {item['item']} | {item.get('round', '-')} | {item.get('label', '-')} | "
-                f"{_number(item.get('error'))} | {_number(item.get('t'), '.2f')} | "
-                f"{item.get('significant', '-')} |"
-            )
-        lines.append("")
-    return "\n".join(lines)
-
-
-def _number(value, spec: str = ".4f") -> str:
-    return "-" if value is None else format(value, spec)

@@ -1,4 +1,5 @@
-"""`jaxcascade simulate`: apply a saved model (`_model_file`) to new records.
+"""`jaxcascade simulate`: apply a saved model (`_model_file`) to new records
+(`_workflow._simulate.simulate_model`).
 
 Each record is read as the model's estimation records were (the saved decimation,
 detrending and scaling; its signals from the record spec, `--input`/`--output`, or the
@@ -13,6 +14,7 @@ the record's unit and fit %; `--report` also draws one figure per record
 from __future__ import annotations
 
 import argparse
+import pathlib
 
 from ._common import (
     RECORD_SPEC,
@@ -27,98 +29,44 @@ from ._common import (
 
 def run_simulate(args) -> int:
     # imported here, not at the top: `--help` answers without importing JAX
-    import pathlib
-
-    from .._data import read_record
-    from .._measured._model_file import load_model
-    from ._loop import _name
+    from .._workflow._simulate import simulate_model
 
     if args.init_samples is not None and args.init_samples < 0:
         raise CLIError(f"--init-samples must be >= 0, got {args.init_samples}.")
-    saved = load_model(args.model)
     options = record_options(
         argparse.Namespace(
-            input=args.input or saved.input_column,
-            output=args.output or saved.output_column,
-            # the model's time column unless --ts gives the period of records without one
-            time=args.time or (saved.time_column if args.ts is None else None),
+            input=args.input,
+            output=args.output,
+            time=args.time,
             ts=args.ts,
             units=args.units,
-            detrend=saved.detrend,
-            decimate=saved.decimation,
+            detrend="none",  # not an option here: the model's own
+            decimate=1,  # likewise
         )
     )
-    if options["sample_period"] is None and options["time_column"] is None and saved.sample_period:
-        # a record without time column or --ts: taken at the model's period
-        options["sample_period"] = saved.sample_period / saved.decimation
-    options["input_unit"] = options["input_unit"] or saved.input_unit
-    options["output_unit"] = options["output_unit"] or saved.output_unit
-    records = [
-        read_record(spec, **options, anti_alias=saved.anti_alias, scaling=saved.scaling)
-        for spec in args.records
-    ]
-    for record in records:  # all refused before any work
-        saved.check_period(record)
-    folder = pathlib.Path(args.report) if args.report else None
+    folder = args.report
     if folder is not None:
         writable_folder(folder, "--report")
-    comparisons = [saved.compare(r, args.init_samples, name=_name(r)) for r in records]
-    unit = records[0].output_unit or "output unit"
-    result = {
-        "model": str(args.model),
-        "structure": saved.model.structure(),
-        "sample_period": saved.sample_period,
-        "decimation": saved.decimation,
-        "unit": records[0].output_unit,
-        "records": [c.to_dict() for c in comparisons],
-    }
+    simulation = simulate_model(
+        args.model,
+        args.records,
+        init_samples=args.init_samples,
+        input_column=options["input_column"],
+        output_column=options["output_column"],
+        time_column=options["time_column"],
+        sample_period=options["sample_period"],
+        input_unit=options["input_unit"],
+        output_unit=options["output_unit"],
+    )
     if folder is not None:
-        from .._plot._comparison import plot_comparison
-
-        (folder / "simulate.json").write_text(strict_json(result, indent=1))
-        (folder / "simulate.md").write_text(_markdown(result, unit))
-        for k, c in enumerate(comparisons, 1):
-            plot_comparison(
-                c,
-                folder / f"simulate_{k}.png",
-                title=f"{c.score.record}: measured vs {result['structure']}",
-                units=unit,
-            )
+        simulation.report(folder)
     if args.json:
-        print(strict_json(result))
+        print(strict_json(simulation.to_dict()))
     else:
-        print(_markdown(result, unit), end="")
+        print(simulation.markdown(), end="")
         if folder is not None:
-            print(f"report: {folder / 'simulate.md'}")
+            print(f"report: {pathlib.Path(folder) / 'simulate.md'}")
     return 0
-
-
-def _f(value, digits: int = 4) -> str:
-    return "-" if value is None else f"{value:.{digits}f}"
-
-
-def _markdown(result: dict, unit: str) -> str:
-    rows = result["records"]
-    lines = [
-        f"model: `{result['structure']}` ({result['model']})",
-        "",
-        "| record | samples | init samples | NRMSE | fit % | RMSE "
-        f"({unit}) | NRMSE, from rest | fit %, from rest | RMSE, from rest |",
-        "|---|---|---|---|---|---|---|---|---|",
-    ]
-    for r in rows:
-        lines.append(
-            f"| {r['record']} | {r['samples']} | {r['init_samples']} | {_f(r['error'])} | "
-            f"{_f(r['fit_percent'], 1)} | {r['rmse']:.4g} | {_f(r['error_from_rest'])} | "
-            f"{_f(r['fit_percent_from_rest'], 1)} | {r['rmse_from_rest']:.4g} |"
-        )
-    lines += [
-        "",
-        "Initialised: the state set from the measured output on the first init samples, "
-        "scored after them; from rest: the whole record simulated from rest. NRMSE is "
-        "normalised by the output's standard deviation (1 is the mean).",
-    ]
-    return "\n".join(lines) + "\n"
 
 
 def add_parser(subparsers) -> None:

@@ -199,8 +199,7 @@ def sweep(args) -> int:
         progress=None,
         command=["jaxcascade", *sys.argv[1:]],
     )
-    summary = summarise(table)
-    summary.to_csv(summary_path(out), index=False)
+    summary = summarise(table)  # `run` wrote it beside `out`, `summary_path(out)`
     _print_cells(summary)
     if spec.input != "uniform" or spec.noise != "white":
         print(_experiment_line(spec, summary))

@@ -9,6 +9,11 @@ the fit never saw.
   loop's noise model (`_noise`);
 - the initial state (`_initial_state`) and the scores (`_scoring`);
 - the ARX peer (`_arx`) and the integrating-plant check (`_integrating`);
+- a benchmark's protocol (`_benchmark_protocol`: its split, decimation and test figures);
 - the loop (`_loop`), its checkpoint (`_loop_checkpoint`), the saved model
-  (`_model_file`), and the synthetic records its tests use (`_testing`).
+  (`_model_file`), and the synthetic records its tests use (`_testing`);
+- the model schema in the records' units (`_schema`) and the report's text (`_report`).
+
+The commands' Python calls (`fit_record`, `loop_records`, `loop_benchmark`,
+`simulate_model`) compose these one layer up, in `_workflow/`.
 """

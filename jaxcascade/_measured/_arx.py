@@ -82,3 +82,15 @@ def best_arx(u, y, max_order: int = 4, stable: bool = True) -> ARX:
         kind = "stable " if stable else ""
         raise ValueError(f"No {kind}ARX model up to order {max_order} fits this record.")
     return best
+
+
+def arx_peer(u, y) -> tuple[ARX, float | None]:
+    """The loop's linear peer of the estimation records `(u, y)` joined end to end:
+    `best_arx`, and None; where every equation-error fit has a pole on or outside the
+    unit circle (an output that integrates, with `--integrate no`), the best finite one
+    and its largest pole."""
+    try:
+        return best_arx(u, y), None
+    except ValueError:
+        arx = best_arx(u, y, stable=False)
+        return arx, arx.largest_pole

@@ -12,7 +12,9 @@ output as any other state:
   differences of that window, and `y(t) = y_measured(start - 1) + sum of dy(start..t)`.
 
 `integrates(u, y)` is the test: no stable ARX model up to order 4 fits the record, or the
-best one has a pole within 1e-3 of the unit circle (`_arx.best_arx`).
+best one has a pole within 1e-3 of the unit circle (`_arx.best_arx`); `integration`
+applies it to the loop's estimation records under the option `auto`, `yes` or `no`
+(`--integrate`) and says what it did in one sentence.
 """
 
 from __future__ import annotations
@@ -37,6 +39,41 @@ def integrates(u, y) -> float | None:
     except ValueError:
         return best_arx(u, y, stable=False).largest_pole
     return pole if pole >= INTEGRATOR_POLE else None
+
+
+INTEGRATE_OPTIONS = ("auto", "yes", "no")
+
+
+def integration(records, option: str = "auto") -> dict | None:
+    """Whether the loop models the output of the estimation `records` (`_data.Record`s)
+    through its difference: None where not (`option` "no", or "auto" and `integrates`
+    finds a stable ARX fit), else `{"largest_arx_pole" (None where "yes" forced it),
+    "option", "sentence"}`, the sentence the loop prints and reports."""
+    if option not in INTEGRATE_OPTIONS:
+        raise ValueError(
+            f"integrate must be one of {', '.join(INTEGRATE_OPTIONS)}, got {option!r}."
+        )
+    if option == "no":
+        return None
+    pole = integrates(
+        np.concatenate([r.u for r in records]), np.concatenate([r.y for r in records])
+    )
+    if option == "auto" and pole is None:
+        return None
+    sentence = (
+        "The output integrates its input"
+        + (
+            f" (no stable linear ARX model fits it; the best one's largest pole is at "
+            f"|z| = {pole:.4f})"
+            if pole is not None
+            else ""
+        )
+        + ": a stable model cannot follow it in free run, so the loop models its "
+        "difference y(t) - y(t-1) and integrates the model's output back for scoring, "
+        "its position set from the measured output like any other state (--integrate no "
+        "turns this off)."
+    )
+    return {"largest_arx_pole": pole, "option": option, "sentence": sentence}
 
 
 def differenced(record):

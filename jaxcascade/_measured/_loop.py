@@ -51,7 +51,9 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array
 
+from .. import _defaults
 from .._compile import bound, compile_count, exported, filter_jit, over_bound, pack
+from .._data import Record, Scaling
 from .._estimator._efficiency import standard_errors
 from .._estimator._levenberg import least_squares
 from .._estimator._refine import from_unconstrained, to_unconstrained
@@ -93,6 +95,7 @@ from ._loop_checkpoint import (
 )
 from ._noise import ARNoise
 from ._oe import OE, cascade_vector, linear_floor
+from ._schema import model_schema
 from ._significance import (
     BANDWIDTH_RULE,
     TEST_NAME,
@@ -597,6 +600,29 @@ class Candidate:
 
 @dataclasses.dataclass
 class LoopResult:
+    """What `model_error_loop` returns: the declared cascade and the final model, each
+    judged on the validation record, and what every round tried.
+
+    - `before`, `after`: the declared cascade's and the final model's `Evaluation` on the
+      validation record(s): the simulation residual and NRMSE (`error`, initialised on
+      `init_samples` samples where they are > 0), the one-step prediction NRMSE, the
+      residual tests.
+    - `base`, `final`: the declared cascade (as fitted) and the final model
+      (`ExtendedModel`, model units); `added`: the effects added, in order; `actions`:
+      what each round did (`{"effect", "action" ("add" or "replace"), "round"}`).
+    - `candidates`: every `Candidate` tried, with its score and significance test;
+      `steps`: `(label, model, evaluation)` of each step on the validation record.
+    - `t_threshold`, `min_gain`: the significance rule the loop applied.
+    - `standard_errors`: the final model's standard errors on the estimation records
+      (`model_standard_errors`, model units).
+    - `programs_compiled`: programs XLA compiled during the loop.
+    - `scaling`: the records' units (`_data.Scaling`; the identity for arrays), in which
+      `to_dict` writes the models (`_schema`).
+
+    `warnings` says when the final model is worse than the mean of the output on the
+    validation record; `to_dict()` is the loop's part of the command's JSON.
+    """
+
     before: Evaluation
     after: Evaluation
     base: ExtendedModel
@@ -604,8 +630,8 @@ class LoopResult:
     added: list[str]
     candidates: list[Candidate]
     steps: list[tuple[str, ExtendedModel, Evaluation]] = dataclasses.field(default_factory=list)
-    t_threshold: float = 3.0
-    min_gain: float = 0.02
+    t_threshold: float = _defaults.DM_THRESHOLD
+    min_gain: float = _defaults.MIN_GAIN
     # the final model's estimated standard errors on the estimation records
     # (`model_standard_errors`)
     standard_errors: dict[str, float] = dataclasses.field(default_factory=dict)
@@ -615,16 +641,36 @@ class LoopResult:
     actions: list[dict] = dataclasses.field(default_factory=list)
     # the linear output-error model of the loop's records (`Floor`), or None
     floor: Floor | None = None
+    scaling: Scaling = dataclasses.field(default_factory=Scaling)
+
+    @property
+    def warnings(self) -> list[str]:
+        """One sentence where the final model is worse than the mean of the output
+        (NRMSE above 1) on the validation record(s), else none (the command's verdict
+        against the ARX peer as well: `loop_records`)."""
+        if not self.after.error > 1.0:
+            return []
+        return [
+            f"The final model is worse than the mean of the output (NRMSE 1) on the "
+            f"validation record (NRMSE {self.after.error:.3f}): its structure does not "
+            "describe this system, or the records do not cover the input where it was "
+            "scored."
+        ]
+
+    def __repr__(self) -> str:
+        added = ", ".join(self.added) or "nothing"
+        rounds = max((c.round for c in self.candidates), default=0)
+        warned = f"; {len(self.warnings)} warning(s)" if self.warnings else ""
+        return (
+            f"LoopResult({self.final.structure()!r}; added {added}; validation NRMSE "
+            f"{self.before.error:.4g} -> {self.after.error:.4g}; {len(self.candidates)} "
+            f"candidates in {rounds} round(s){warned})"
+        )
 
     def to_dict(self) -> dict:
-        def params(model):
-            out = {"cascade": model.params.to_dict(), "orders": str(model.orders)}
-            for effect in model.effects:
-                out[effect.name] = effect.parameters()
-            if model.noise.order:
-                out[ARNoise.name] = {"ar": np.asarray(model.noise.coefficients).tolist()}
-            return out
-
+        """The loop's figures, decisions, candidates and residual tests; the declared
+        cascade (`model_before`) and the final model with its standard errors
+        (`model_after`) in the schema (`_schema.model_schema`, the records' units)."""
         return {
             "error_before": self.before.error,
             "error_after": self.after.error,
@@ -666,9 +712,8 @@ class LoopResult:
                 "before": self.before.tests.to_dict(arrays=False),
                 "after": self.after.tests.to_dict(arrays=False),
             },
-            "model_before": params(self.base),
-            "model_after": params(self.final),
-            "standard_errors_after": dict(self.standard_errors),
+            "model_before": model_schema(self.base, self.scaling),
+            "model_after": model_schema(self.final, self.scaling, self.standard_errors),
             "programs_compiled": self.programs_compiled,
             "linear_floor": None
             if self.floor is None
@@ -756,16 +801,63 @@ def _host_error(model: ExtendedModel, u_vals, y_vals, init_samples, integrating)
     return float(np.sqrt(np.mean((s - y) ** 2)) / (np.std(y) + 1e-300))
 
 
+def _is_records(value) -> bool:
+    """A `Record` or a non-empty list or tuple of them."""
+    if isinstance(value, Record):
+        return True
+    return (
+        isinstance(value, list | tuple)
+        and bool(value)
+        and all(isinstance(v, Record) for v in value)
+    )
+
+
+def _arrays_of(args: tuple, kwargs: dict) -> tuple[tuple, dict]:
+    """`model_error_loop(estimation, validation, orders, ...)` with `Record`s as its
+    array form `(u_est, y_est, u_val, y_val, orders, ...)`: the records' arrays (model
+    units), their scaling for the result and, unless given, their sample period."""
+    if not args or not _is_records(args[0]):
+        return args, kwargs
+    estimation, validation, *rest = args
+    if not _is_records(validation):
+        raise ValueError(
+            "model_error_loop: with estimation Records, the validation record(s) must be "
+            "Records too (model_error_loop(estimation, validation, orders))."
+        )
+    train = [estimation] if isinstance(estimation, Record) else list(estimation)
+    valid = [validation] if isinstance(validation, Record) else list(validation)
+    scalings = {r.scaling for r in (*train, *valid)}
+    if len(scalings) > 1:
+        raise ValueError(
+            "model_error_loop: the records are in different scalings; read the validation "
+            "records with scaling=estimation.scaling (read_record, record_from_arrays)."
+        )
+    orders = rest[0] if rest else kwargs.pop("orders", Orders.parse(_defaults.ORDERS))
+    kwargs.setdefault("scaling", train[0].scaling)
+    period = next((r.sample_period for r in valid if r.sample_period), None)
+    if period is not None:
+        kwargs.setdefault("sample_period", period)
+
+    def arrays(records):
+        if len(records) == 1:
+            return records[0].u, records[0].y
+        return [r.u for r in records], [r.y for r in records]
+
+    return (*arrays(train), *arrays(valid), orders, *rest[1:]), kwargs
+
+
 def _grouped(loop):
     """`loop` with the groups of the effects it may try in force (`_effects._choice`):
     members of one group are fitted and scored by one program; and its records'
     simulations padded to one length (`_effects.padded_to`): one program per structure
-    for every record."""
+    for every record. `Record`s given in place of arrays are taken apart first
+    (`_arrays_of`)."""
 
     signature = inspect.signature(loop)
 
     @functools.wraps(loop)
     def run(*args, effects: tuple[str, ...] | None = None, **kwargs):
+        args, kwargs = _arrays_of(args, kwargs)
         names = tuple(effects or EFFECTS)
         # every record of the loop simulated by one program per structure (`padded_to`)
         given = signature.bind_partial(*args, **kwargs).arguments
@@ -790,12 +882,12 @@ def model_error_loop(
     y_est,
     u_val,
     y_val,
-    orders: Orders,
+    orders: Orders | None = None,
     *,
     base: CascadeParams | None = None,
-    max_effects: int = 3,
-    t_threshold: float = 3.0,
-    min_gain: float = 0.02,
+    max_effects: int = _defaults.MAX_EFFECTS,
+    t_threshold: float = _defaults.DM_THRESHOLD,
+    min_gain: float = _defaults.MIN_GAIN,
     noise_alpha: float = 1e-3,
     sample_period: float = 1.0,
     effects: tuple[str, ...] | None = None,
@@ -803,12 +895,21 @@ def model_error_loop(
     progress=None,
     robust: Robust | None = None,
     key=None,
-    init_samples: int = 0,
+    init_samples: int | None = None,
     integrating: bool = False,
     checkpoints: Checkpoints | None = None,
-    threads: int = 1,
+    threads: int | None = None,
+    scaling: Scaling | None = None,
 ) -> LoopResult:
-    """Run the loop (module docstring) on an estimation and a validation record.
+    """Run the loop (module docstring) on estimation and validation records; the
+    defaults are the command's (`_defaults`, docs/defaults.md).
+
+    Two forms: `model_error_loop(estimation, validation, orders=None, ...)` with `Record`s
+    (one or a list each, in one scaling: `read_record`, `record_from_arrays`; their
+    arrays are in model units, their sample period and scaling taken along), or
+    `model_error_loop(u_est, y_est, u_val, y_val, orders=None, ...)` with arrays.
+    `loop_records` runs the whole command (the ARX peer, scoring, test records, the
+    report) on records.
 
     **Arguments:**
 
@@ -820,7 +921,7 @@ def model_error_loop(
       simulated from its own initial state; the declared cascade's first fit is on the
       records joined end to end, then refined on each). `u_val`, `y_val` may be lists
       of several validation records, each scored on its own and pooled (`evaluate`).
-    - `orders`: declared orders of the cascade.
+    - `orders`: declared orders of the cascade (default `_defaults.ORDERS`, 2,2,2,2).
     - `base`: a fitted cascade to start from; by default the robust estimator fits one.
     - `t_threshold`, `min_gain`: a candidate is significant when its Diebold-Mariano
       statistic (`_significance`; an effect's pooled over the validation and the
@@ -834,7 +935,9 @@ def model_error_loop(
       (`Evaluation.window_error`).
     - `init_samples`: with `n > 0` every model is judged on the validation record with
       its state set from the measured output on the first `n` samples (`evaluate`), the
-      nonlinear benchmarks' convention, and on the samples after them.
+      nonlinear benchmarks' convention, and on the samples after them; 0 from rest;
+      None (the default) the command's rule, `_defaults.init_samples` of the validation
+      records' lengths (50, at most a quarter of the shortest).
     - `integrating`: the records' outputs are differences of a measured output that
       integrates its input (`_integrating`): every validation NRMSE, and so every
       decision, is of the output integrated back (`evaluate`).
@@ -847,8 +950,15 @@ def model_error_loop(
       run's report. Progress (`progress`) says the round, the candidate, the time
       elapsed and an estimate of the round's remaining time.
     - `threads`: candidates of a round fitted at once (`_Workers`); the results are the
-      same for any number.
+      same for any number (default `default_threads()`, as the command).
+    - `scaling`: the records' units (`_data.Scaling`), in which `LoopResult.to_dict`
+      writes the models; the `Record`s' own where given, else the identity.
     """
+    if orders is None:
+        orders = Orders.parse(_defaults.ORDERS)
+    if threads is None:
+        threads = default_threads()
+    scaling = Scaling() if scaling is None else scaling
     if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
         raise ValueError(f"model_error_loop: threads must be an integer >= 1, got {threads!r}.")
     say = progress or (lambda message: None)
@@ -869,6 +979,8 @@ def model_error_loop(
         raise ValueError(
             f"model_error_loop: {len(u_vals)} validation inputs but {len(y_vals)} outputs."
         )
+    if init_samples is None:  # the command's default window (`_defaults.init_samples`)
+        init_samples = _defaults.init_samples(np.shape(u)[-1] for u in u_vals)
     several = len(u_vals) > 1
     checked = [
         record(
@@ -1172,6 +1284,7 @@ def model_error_loop(
         compile_count() - compiled_before,
         actions,
         floor,
+        scaling,
     )
 
 

@@ -1,16 +1,18 @@
 """A fitted model saved to reuse: one JSON file that holds everything needed to apply it
 to a new record (MATLAB's `compare` and `sim`, SysIdentPy's `predict`).
 
-The file (`docs/models.md` documents every key) holds the model's structure (the
-cascade's orders, or none where a hysteresis path replaced it; the effects in order, each
-by its registry name with its parameters; the AR noise model), every parameter by name,
-and what the records went through before the model saw them: the sample period after
+The file (`docs/models.md` documents every key) holds the model in the package's one
+schema (`_schema`: its structure and orders, every estimate with its standard error in
+the records' units and in model units, the effects in order, the AR noise model), and
+what the records went through before the model saw them: the sample period after
 decimation (the model's dynamics are per sample), the decimation and its anti-alias
 filter, the detrending, the affine scaling to model units (`_data.Scaling`), the
 signals' names and units, whether the output was modelled through its difference
 (`_integrating`), and the state-initialisation window of initialised scoring
 (`_scoring`). `format` and `format_version` name the layout, `jaxcascade_version` the
-package that wrote it.
+package that wrote it. Version 2 writes the model in the schema; a file of version 1
+(before it: the cascade's parameters in model units under `model.parameters`, the
+effects' fields under their own names, the scaling under `data`) still loads.
 
 `SavedModel` applies the model the way the loop scores its records: a record read with
 the saved options (`record_options`) and scaling is scored by `_scoring.score_record`
@@ -34,15 +36,17 @@ from typing import Any
 import numpy as np
 
 from .._data import Record, Scaling, record_from_arrays
+from .._json import finite_or_null
 from .._metrics import fit_percent
 from .._system._model import CascadeParams, Orders
 from .._version import __version__
 from ._effects import EFFECTS, ExtendedModel
 from ._noise import ARNoise
+from ._schema import model_from_schema, model_schema, schema_errors
 from ._scoring import RecordScore, score_record
 
 FORMAT = "jaxcascade-model"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
 # A record's sample period may differ from the model's by this fraction
 # (`_data.check_sample_periods`' tolerance: CSV times are rounded).
 PERIOD_RTOL = 1e-2
@@ -98,6 +102,8 @@ class SavedModel:
       (`_integrating`), integrated back when applied.
     - `provenance`: what wrote it (a command, the declared structure, the loop's
       actions), free-form; `version`: the package version that wrote it.
+    - `std_errors`: the estimates' standard errors in model units (the names of
+      `_loop.model_standard_errors`), or None where none were saved (a file of version 1).
     """
 
     model: ExtendedModel
@@ -115,6 +121,7 @@ class SavedModel:
     integrating: bool = False
     provenance: dict = dataclasses.field(default_factory=dict)
     version: str = __version__
+    std_errors: dict | None = None
 
     @classmethod
     def from_record(cls, model: ExtendedModel, record: Record, **settings) -> SavedModel:
@@ -173,6 +180,46 @@ class SavedModel:
             input_unit=self.input_unit,
             output_unit=self.output_unit,
         )
+
+    def read_record(
+        self,
+        spec,
+        *,
+        input_column=None,
+        output_column=None,
+        time_column=None,
+        sample_period: float | None = None,
+        input_unit: str | None = None,
+        output_unit: str | None = None,
+    ) -> Record:
+        """A record read as the model's estimation records were (`_data.read_record`:
+        the saved decimation, anti-alias filter, detrending and scaling): its signals
+        from the spec, the arguments or the saved names; its period from
+        `time_column`, the saved time column unless `sample_period` is given, or
+        `sample_period`, else the model's; its units the given or the saved ones. A
+        record sampled otherwise than the model is refused (`check_period`)."""
+        from .._data import read_record
+
+        if time_column is None and sample_period is None:
+            time_column = self.time_column
+        if sample_period is None and time_column is None and self.sample_period:
+            # a record without time column or period: taken at the model's period
+            sample_period = self.sample_period / self.decimation
+        record = read_record(
+            spec,
+            input_column if input_column is not None else self.input_column,
+            output_column if output_column is not None else self.output_column,
+            time_column=time_column,
+            sample_period=sample_period,
+            input_unit=input_unit or self.input_unit,
+            output_unit=output_unit or self.output_unit,
+            detrend=self.detrend,
+            decimate=self.decimation,
+            anti_alias=self.anti_alias,
+            scaling=self.scaling,
+        )
+        self.check_period(record)
+        return record
 
     def check_period(self, record: Record) -> None:
         """Refuse a record sampled otherwise than the model (one sentence)."""
@@ -239,22 +286,13 @@ class SavedModel:
     # ---- the file ----------------------------------------------------------------------
 
     def to_dict(self) -> dict[str, Any]:
-        m = self.model
+        """The file's contents: the model in the schema (`_schema.model_schema`, in the
+        records' units and in model units) and the records' preprocessing."""
         return {
             "format": FORMAT,
             "format_version": FORMAT_VERSION,
             "jaxcascade_version": self.version,
-            "structure": m.structure(),
-            "model": {
-                "cascade": bool(m.cascade),
-                "orders": dataclasses.asdict(m.orders),
-                "parameters": m.params.to_dict(),
-                "effects": [{"name": e.name, "parameters": e.parameters()} for e in m.effects],
-                "noise": {
-                    "name": ARNoise.name,
-                    "ar": np.asarray(m.noise.coefficients, float).tolist(),
-                },
-            },
+            "model": model_schema(self.model, self.scaling, self.std_errors),
             "data": {
                 "sample_period": self.sample_period,
                 "decimation": self.decimation,
@@ -263,16 +301,23 @@ class SavedModel:
                 "input": {"column": self.input_column, "unit": self.input_unit},
                 "output": {"column": self.output_column, "unit": self.output_unit},
                 "time_column": self.time_column,
-                "scaling": self.scaling.to_dict(),
             },
             "scoring": {"init_samples": self.init_samples, "integrating": self.integrating},
             "provenance": self.provenance,
         }
 
     def save(self, path: str | os.PathLike) -> pathlib.Path:
-        """Write the model file (`to_dict` as JSON); non-finite parameters are refused."""
+        """Write the model file (`to_dict` as JSON); non-finite parameters are refused
+        (an infinite standard error, of a parameter the records do not determine, is
+        written as null)."""
+        data = self.to_dict()
+        model = data["model"]
+        for key in ("std_errors", "std_errors_model_units"):
+            model[key] = finite_or_null(model[key])
+        for entry in model["effects"]:
+            entry["std_errors_model_units"] = finite_or_null(entry["std_errors_model_units"])
         try:
-            text = json.dumps(self.to_dict(), indent=1, allow_nan=False)
+            text = json.dumps(data, indent=1, allow_nan=False)
         except ValueError:
             raise ValueError(
                 "The model has a parameter that is not a finite number; it cannot be saved."
@@ -301,44 +346,18 @@ class SavedModel:
 
     @classmethod
     def _from_dict(cls, data: dict) -> SavedModel:
-        import jax.numpy as jnp
-
-        def array(value, name):
-            values = np.asarray(value, float)
-            if not np.all(np.isfinite(values)):
-                raise ValueError(f"parameter {name} is not a finite number")
-            return jnp.asarray(values)
-
-        m = data["model"]
-        orders = Orders(**m["orders"])
-        values = m["parameters"]
-        if list(values) != list(orders.names):
-            raise ValueError(
-                f"the parameters {list(values)} are not those of orders {orders}, "
-                f"{list(orders.names)}"
-            )
-        vector = array([values[name] for name in orders.names], "of the cascade")
-        # unchecked like the loop's own models: a replaced cascade's are never used
-        params = CascadeParams.from_vector(vector, orders, check=False)
-        effects = []
-        for entry in m["effects"]:
-            kind = EFFECTS.get(entry["name"])
-            if kind is None:
-                raise ValueError(f"unknown effect {entry['name']!r} (known: {', '.join(EFFECTS)})")
-            fields = [f.name for f in dataclasses.fields(kind)]
-            given = entry["parameters"]
-            if sorted(given) != sorted(fields):
-                raise ValueError(f"effect {kind.name} takes the parameters {fields}, got {given}")
-            effects.append(kind(**{f: array(given[f], f"{kind.name}.{f}") for f in fields}))
-        noise = ARNoise(array(m["noise"]["ar"], "ar").reshape(-1))
-        model = ExtendedModel(params, tuple(effects), noise, cascade=bool(m["cascade"]))
+        if data["format_version"] == 1:
+            model, scaling, errors = _version_1_model(data), data["data"]["scaling"], None
+        else:
+            model, scaling = model_from_schema(data["model"]), data["model"]["scaling"]
+            errors = schema_errors(data["model"]) or None
         d, s = data["data"], data["scoring"]
         period = d["sample_period"]
         if period is not None and not (float(period) > 0 and math.isfinite(float(period))):
             raise ValueError(f"sample_period must be a positive number, got {period}")
         return cls(
             model,
-            scaling=Scaling(**d["scaling"]),
+            scaling=Scaling(**scaling),
             sample_period=None if period is None else float(period),
             decimation=int(d["decimation"]),
             anti_alias=d["anti_alias"],
@@ -352,7 +371,44 @@ class SavedModel:
             integrating=bool(s["integrating"]),
             provenance=dict(data.get("provenance") or {}),
             version=str(data.get("jaxcascade_version")),
+            std_errors=errors,
         )
+
+
+def _version_1_model(data: dict) -> ExtendedModel:
+    """The model of a file of format version 1: the cascade's parameters in model units
+    under `model.parameters` by `Orders.names`, each effect's fields under their own
+    names (`Effect.parameters`)."""
+    import jax.numpy as jnp
+
+    def array(value, name):
+        values = np.asarray(value, float)
+        if not np.all(np.isfinite(values)):
+            raise ValueError(f"parameter {name} is not a finite number")
+        return jnp.asarray(values)
+
+    m = data["model"]
+    orders = Orders(**m["orders"])
+    values = m["parameters"]
+    if list(values) != list(orders.names):
+        raise ValueError(
+            f"the parameters {list(values)} are not those of orders {orders}, {list(orders.names)}"
+        )
+    vector = array([values[name] for name in orders.names], "of the cascade")
+    # unchecked like the loop's own models: a replaced cascade's are never used
+    params = CascadeParams.from_vector(vector, orders, check=False)
+    effects = []
+    for entry in m["effects"]:
+        kind = EFFECTS.get(entry["name"])
+        if kind is None:
+            raise ValueError(f"unknown effect {entry['name']!r} (known: {', '.join(EFFECTS)})")
+        fields = [f.name for f in dataclasses.fields(kind)]
+        given = entry["parameters"]
+        if sorted(given) != sorted(fields):
+            raise ValueError(f"effect {kind.name} takes the parameters {fields}, got {given}")
+        effects.append(kind(**{f: array(given[f], f"{kind.name}.{f}") for f in fields}))
+    noise = ARNoise(array(m["noise"]["ar"], "ar").reshape(-1))
+    return ExtendedModel(params, tuple(effects), noise, cascade=bool(m["cascade"]))
 
 
 def load_model(path: str | os.PathLike) -> SavedModel:

@@ -101,13 +101,18 @@ def _rmse(y, simulated) -> float:
 
 
 def verdict(
-    final: list[RecordScore], arx: list[RecordScore], uncovered: frozenset = frozenset()
+    final: list[RecordScore],
+    arx: list[RecordScore],
+    uncovered: frozenset = frozenset(),
+    advice=(),
 ) -> list[str]:
     """One sentence per scored record on which the final model is worse than the mean
     (NRMSE 1) or than the ARX peer, with what the user can try; empty when it is better
     than both everywhere. `uncovered`: the `(record, role)` pairs whose input the
     estimation records do not cover (`_coverage.sentences` flags them): there the miss
-    may be the records', not the structure's, and the sentence says so."""
+    may be the records', not the structure's, and the sentence says so. `advice`: what
+    the records and the residual show (`_advice.advise`), said in place of the generic
+    options where there is any."""
     peers = {(s.record, s.role): s for s in arx}
     sentences = []
     for s in final:
@@ -117,18 +122,67 @@ def verdict(
             worse.append("the mean of the output (NRMSE 1)")
         if peer is not None and s.headline > peer.headline:
             worse.append(f"the linear ARX peer ({peer.headline:.3f})")
-        if worse:
-            where = "window" if s.window_error is not None else "record"
-            cause = (
-                "its structure does not describe this system, or the records do not cover "
-                "the input where it was scored (the report's input coverage)"
-                if (s.record, s.role) in uncovered
-                else "its structure does not describe this system"
-            )
-            sentences.append(
-                f"The final model is worse than {' and '.join(worse)} on the {s.role} "
-                f"{where} {s.record} (NRMSE {s.headline:.3f}): {cause}; try the hysteresis "
-                "effects (--effects), other --orders, more varied estimation records, or "
-                "another --decimate."
-            )
+        if not worse:
+            continue
+        where = "window" if s.window_error is not None else "record"
+        head = (
+            f"The final model is worse than {' and '.join(worse)} on the {s.role} "
+            f"{where} {s.record} (NRMSE {s.headline:.3f})"
+        )
+        if advice:
+            sentences.append(f"{head}. " + " ".join(f"{a.sentence}." for a in advice))
+            continue
+        cause = (
+            "its structure does not describe this system, or the records do not cover "
+            "the input where it was scored (the report's input coverage)"
+            if (s.record, s.role) in uncovered
+            else "its structure does not describe this system"
+        )
+        sentences.append(
+            f"{head}: {cause}; try the hysteresis effects (--effects), other --orders, more "
+            "varied estimation records, or another --decimate."
+        )
     return sentences
+
+
+def mean_score(scores: list[RecordScore]) -> RecordScore:
+    """One model's validation figures: its one record's score, or the mean over several
+    (a window applies to one record only; RMSE the root of the mean square)."""
+    if len(scores) == 1:
+        return scores[0]
+    first = scores[0]
+    return RecordScore(
+        first.model,
+        "mean over the validation records",
+        "validation",
+        float(np.mean([s.error for s in scores])),
+        None,
+        float(np.mean([s.error_from_rest for s in scores])),
+        None,
+        first.init_samples,
+        float(np.sqrt(np.mean([s.rmse**2 for s in scores]))),
+    )
+
+
+def stored_window(
+    window: tuple[int, int] | None, record, name: str = "window"
+) -> tuple[int, int] | None:
+    """A scoring window `(start, stop)` in samples of the file as stored (before
+    decimation; a ranged record spec's `Record.file_start` counts from the file's first
+    sample) as samples of the decimated `record`, or None; a `ValueError` naming `name`
+    (the option that gave it) where it leaves the record or holds fewer than 2 samples
+    after decimation."""
+    if window is None:
+        return None
+    decimate, length, offset = record.decimation, len(record), record.file_start
+    start, stop = (int(w) - offset for w in window)
+    first, last = start // decimate, -(-stop // decimate)
+    text = f"{int(window[0])}:{int(window[1])}"
+    if not 0 <= start < stop or last > length:
+        raise ValueError(
+            f"{name} {text}: needs START < STOP within the scored record (file samples "
+            f"{offset} to {offset + length * decimate} as stored)."
+        )
+    if last - first < 2:
+        raise ValueError(f"{name} {text}: fewer than 2 samples after decimation by {decimate}.")
+    return first, last

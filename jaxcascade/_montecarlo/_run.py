@@ -21,7 +21,7 @@ import pandas as pd
 from .._estimator import is_host
 from ._engine import run_chunk
 from ._spec import Spec
-from ._tables import read_metadata, run_metadata, write_table
+from ._tables import read_metadata, run_metadata, summarise, write_table
 
 
 def _partial_folder(out: pathlib.Path) -> pathlib.Path:
@@ -118,6 +118,9 @@ def run(
     `OUT.partial/` of another spec) and runs afresh; an `OUT.partial/` of the same spec is
     continued either way. `progress=None` shows a bar on a terminal.
 
+    With `out` the summary (`summarise`) is written beside it, `NAME.summary.csv`
+    (`summary_path`), as `jaxcascade sweep` writes it.
+
     With `spec.scheduler` the chunks run on that Dask cluster (`_distributed`), arriving
     in any order; the table is the same as in this process.
     """
@@ -157,7 +160,10 @@ def run(
         if "input_sha256" in meta:
             stored["input_sha256"] = meta["input_sha256"]
         _check_same(stored, identity, out)
-        return pd.read_parquet(out)
+        table = pd.read_parquet(out)
+        if not summary_path(out).exists():
+            summarise(table).to_csv(summary_path(out), index=False)
+        return table
     else:
         folder.mkdir(parents=True, exist_ok=True)
         temporary = stamp.with_suffix(".tmp")
@@ -182,7 +188,9 @@ def run(
         metadata["input_sha256"] = identity["input_sha256"]
     write_table(table, out, metadata)
     shutil.rmtree(folder)
-    return pd.read_parquet(out)
+    table = pd.read_parquet(out)
+    summarise(table).to_csv(summary_path(out), index=False)
+    return table
 
 
 def _backends(folder: pathlib.Path) -> str:
