@@ -49,7 +49,7 @@ The definitions, and where they are documented:
 - the maps after the cascade (`_effects/_wiener.py`): `output_polynomial` `y + c0 + c2
   y^2 + c3 y^3`; `output_fold` `c0 + c1 sqrt((y - s)^2 + EPS^2) + c2 (y - s)^2`, EPS =
   1e-3 (`FOLD_EPS`); `output_dynamics` `w(t) = y(t) + sum_i beta_i y(t-i)`, `out(t) =
-  w(t) - sum_j alpha_j out(t-j)`, from rest.
+  w(t) - sum_j alpha_j out(t-j)`, from rest, plus `offset`.
 - `general_backlash` (`_effects/_curved.py`, `docs/general_backlash.md`): the cascade's
   backlash with curved branches on its own `cL`, `mR`, `cR`:
   `fL = (x + cL) + sum_i curveL[i-2] (x + cL)^i`, `fR = mR (x - cR) + sum_i
@@ -270,7 +270,7 @@ def _output_effect(name, p, y, x):
             out[t] = w - sum(
                 alpha[j - 1] * oracle.past(out, t - j) for j in range(1, len(alpha) + 1)
             )
-        return out
+        return out + p["offset"]
     if name == "output_offset":
         return y + p["offset"]
     if name == "output_drift":

@@ -79,7 +79,7 @@ INSTANCES = {
     "velocity_friction": VelocityFriction(jnp.array([0.3, 0.4])),
     "output_polynomial": OutputPolynomial(jnp.array([0.0, 0.15, -0.08])),
     "output_fold": OutputFold(jnp.array([0.0, 1.0, 0.0, -0.4])),
-    "output_dynamics": OutputDynamics(jnp.array([0.4]), jnp.array([-0.6])),
+    "output_dynamics": OutputDynamics(jnp.array([0.4]), jnp.array([-0.6]), jnp.asarray(0.1)),
 }
 
 

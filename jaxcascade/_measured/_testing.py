@@ -83,7 +83,10 @@ UNDECLARED = {
     "direct_term": lambda: (_with(DirectTerm(_vector(0.6))), None),
     "output_polynomial": lambda: (_with(OutputPolynomial(_vector(0.0, 0.15, -0.08))), None),
     "output_fold": lambda: (_with(OutputFold(_vector(0.0, 1.0, 0.0, -0.4))), None),
-    "output_dynamics": lambda: (_with(OutputDynamics(_vector(0.4), _vector(-0.6))), None),
+    "output_dynamics": lambda: (
+        _with(OutputDynamics(_vector(0.4), _vector(-0.6), _scalar(0.0))),
+        None,
+    ),
     None: lambda: (plain(_example1()), None),
 }
 

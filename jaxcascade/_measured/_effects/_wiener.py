@@ -13,8 +13,10 @@ the sensor or the output stage, and with dynamics after it:
   a speed, CED's belt drive), a rectifier, with a smooth correction. The absolute value
   is smoothed over `EPS` (model units) so that its derivative is finite at the fold.
 - `OutputDynamics` (`output_dynamics`): a second linear block after the static part,
-  `y_out = (1 + beta_1 q^-1 + ..) / (1 + alpha_1 q^-1 + ..) y` (unit gain at high
-  frequency: the cascade holds the gain): the Wiener-Hammerstein sandwich (J. Voros has
+  `y_out = (1 + beta_1 q^-1 + ..) / (1 + alpha_1 q^-1 + ..) y + c` (unit gain at high
+  frequency: the cascade holds the gain; a block of unit gain at zero frequency instead
+  was measured worse, its refits stopping further from the truth on the synthetic
+  record): the Wiener-Hammerstein sandwich (J. Voros has
   published its form with an output backlash: the cascade's backlash, and a static map
   where one was added, sit between the two linear blocks).
 
@@ -25,7 +27,8 @@ it leave a coloured error correlated with the input (`autocorrelation`,
 `cross_correlation`, `spectrum`). Starts: the polynomial's coefficients regressed on the
 current output's powers (not tried where they explain less than `_feedback.MIN_EXPLAINED`
 of the residual), the fold at the lower quantiles of the current output (where a
-sign-blind output touches zero), the dynamics at the identity and at two stable pairs.
+sign-blind output touches zero), the dynamics at the identity, at two stable pairs and
+at the filter from the current output to the measured one (equation error).
 """
 
 from __future__ import annotations
@@ -131,8 +134,8 @@ class OutputDynamics(Effect):
     name: ClassVar[str] = "output_dynamics"
     signature: ClassVar[tuple[str, ...]] = ("autocorrelation", "cross_correlation", "spectrum")
     description: ClassVar[str] = (
-        "linear dynamics after the static output map: (1 + beta q^-1 ..) / (1 + alpha "
-        "q^-1 ..) (a Wiener-Hammerstein sandwich)"
+        "linear dynamics after the cascade and its output map: (1 + beta q^-1 ..) / "
+        "(1 + alpha q^-1 ..) y + c (a Wiener-Hammerstein sandwich)"
     )
     needs_signature: ClassVar[bool] = True
     # one structure, two poles and two zeros (a first-order filter is its special case):
@@ -141,6 +144,9 @@ class OutputDynamics(Effect):
 
     zeros: Float[Array, " m"]  # beta_1 .. beta_m
     poles: Float[Array, " n"]  # alpha_1 .. alpha_n
+    # a constant after the block (a sensor's or an output stage's bias): with it the
+    # refits of the synthetic record reach its truth, without it they stop short
+    offset: Float[Array, ""]
 
     def _filter(self, y, y_past, out_past):
         """The filter's output on `y`, continued from the past inputs `y_past` and
@@ -157,7 +163,8 @@ class OutputDynamics(Effect):
 
     def output(self, y, x):
         m, n = self.zeros.shape[-1], self.poles.shape[-1]
-        return self._filter(y, jnp.zeros((m,), y.dtype), jnp.zeros((n,), y.dtype))
+        out = self._filter(y, jnp.zeros((m,), y.dtype), jnp.zeros((n,), y.dtype))
+        return out + self.offset.astype(y.dtype)
 
     def rest_state(self, u):
         m, n = self.zeros.shape[-1], self.poles.shape[-1]
@@ -168,7 +175,7 @@ class OutputDynamics(Effect):
         y_past, out_past = state.free[:m], state.free[m:]
         out = self._filter(y, y_past, out_past)
         free = jnp.concatenate([recent(y_past, y, at), recent(out_past, out, at)])
-        return out, EffectState(free, state.known)
+        return out + self.offset.astype(y.dtype), EffectState(free, state.known)
 
     @classmethod
     def starts_records(cls, model, records):
@@ -183,10 +190,47 @@ class OutputDynamics(Effect):
             }
             if k == 2:  # a stable pair: 1 - 0.5 q^-1 + 0.0625 q^-2 has its roots at 0.25
                 values["poles"][1:] = [[-0.5, 0.0625], [0.3, 0.02]]
-            effect = _batched(cls, **values)
-            starts.append(Start(f"{cls.name}:{k}", model.orders, _repeat(model, 3), effect))
+            found = _filter_fit(model, records, k)
+            if found is not None:  # the filter from the current output to the measured one
+                values = {
+                    name: np.concatenate([values[name], found[name][None]]) for name in values
+                }
+            count = values["zeros"].shape[0]
+            effect = _batched(cls, **values, offset=np.zeros(count))
+            starts.append(Start(f"{cls.name}:{k}", model.orders, _repeat(model, count), effect))
         return starts
 
     @classmethod
     def starts(cls, model, u, y, residual):
         return cls.starts_records(model, [(u, y, residual)])
+
+
+def _filter_fit(model, records, k: int):
+    """The filter of order `k` from the current model's output `h` to the measured `y`,
+    `y(t) = sum_{i>=0} b_i h(t-i) - sum alpha_j y(t-j)`, by least squares on the records
+    (equation error: a start), scaled to `b_0 = 1`, as `{"zeros": b_1 / b_0.., "poles":
+    alpha}`; None where its poles are not well inside the unit circle or the records are
+    too short."""
+    rows, targets = [], []
+    for u, y, _ in records:
+        y = np.asarray(y, float)
+        h = simulate_padded(model, np.asarray(u, float))[0]
+        T = len(y)
+        if T <= 10 * k:
+            continue
+        columns = [h[k - i : T - i] for i in range(k + 1)]
+        columns += [-y[k - j : T - j] for j in range(1, k + 1)]
+        rows.append(np.stack(columns, axis=1))
+        targets.append(y[k:])
+    if not rows:
+        return None
+    X, r = np.concatenate(rows), np.concatenate(targets)
+    if not np.all(np.isfinite(X)) or X.shape[0] < 20 * (2 * k + 1):
+        return None
+    theta = np.linalg.lstsq(X, r, rcond=None)[0]
+    b, alpha = theta[: k + 1], theta[k + 1 :]
+    if not np.max(np.abs(np.roots(np.concatenate([[1.0], alpha])))) < 0.99:
+        return None
+    if not abs(b[0]) > 1e-6 * np.max(np.abs(b)):
+        return None
+    return {"zeros": b[1:] / b[0], "poles": alpha}
