@@ -1195,11 +1195,13 @@ def model_error_loop(
                     f"  {c.label:<24} error {c.error:.4g}  t {c.t:7.2f}  "
                     f"{'significant' if c.significant else ''}"
                 )
-        # the linear floor in place of the current model, where it may be the better one
+        # the linear floor in place of the current model, where it may be the better one:
+        # better than the current model and than every candidate of the round
+        best_error = min([current.error, *(c.error for c in round_candidates)])
         if (
             floor is not None
             and model is not floor.model
-            and floor.host_error < FLOOR_MARGIN * current.error
+            and floor.host_error < FLOOR_MARGIN * best_error
         ):
             c = _score_candidate(
                 LINEAR_FLOOR, floor.label, floor.model, *fit_against, **judged_by, action="replace"

@@ -494,23 +494,22 @@ class DynamicsOrder(Effect):
     name: ClassVar[str] = "dynamics_order"
     signature: ClassVar[tuple[str, ...]] = ("autocorrelation", "cross_correlation", "spectrum")
     description: ClassVar[str] = (
-        "one more pole (p + 1) or zero (r + 1) in the linear block, or the orders of the "
-        "linear model the validation records choose"
+        "more poles or zeros in the linear block: one more (p + 1, r + 1), or up to the "
+        "orders of the linear model the validation records choose"
     )
 
     @classmethod
     def starts(cls, model, u, y, residual):
         o = model.orders
         starts = []
+        # one more pole, or zero; or as many as the linear model of the validation
+        # records' choice has (`linear_orders`), where that is more: reached in one
+        # round, at the cost of no further structure (a candidate is a program each)
+        r_chosen, p_chosen = _LINEAR_ORDERS.get() or (0, 0)
         variants = [
-            ("pole", Orders(o.nR, o.nL, o.r, o.p + 1)),
-            ("zero", Orders(o.nR, o.nL, o.r + 1, o.p)),
+            ("pole", Orders(o.nR, o.nL, o.r, max(o.p + 1, p_chosen))),
+            ("zero", Orders(o.nR, o.nL, max(o.r + 1, r_chosen), o.p)),
         ]
-        chosen = _LINEAR_ORDERS.get()
-        if chosen is not None:
-            r, p = max(o.r, chosen[0]), max(o.p, chosen[1])
-            if (r, p) not in [(v.r, v.p) for _, v in variants] and (r, p) != (o.r, o.p):
-                variants.append((f"linear({r},{p})", Orders(o.nR, o.nL, r, p)))
         for label, orders in variants:
             vector = _embed(model.params, orders, {})
             starts.append(Start(f"{cls.name}:{label}", orders, vector[None], cls()))

@@ -191,9 +191,11 @@ class OutputDynamics(Effect):
             if k == 2:  # a stable pair: 1 - 0.5 q^-1 + 0.0625 q^-2 has its roots at 0.25
                 values["poles"][1:] = [[-0.5, 0.0625], [0.3, 0.02]]
             found = _filter_fit(model, records, k)
-            if found is not None:  # the filter from the current output to the measured one
+            if found is not None:
+                # the filter from the current output to the measured one, and the identity
+                # (the two stable pairs are the starts where no such filter is found)
                 values = {
-                    name: np.concatenate([values[name], found[name][None]]) for name in values
+                    name: np.concatenate([found[name][None], values[name][:1]]) for name in values
                 }
             count = values["zeros"].shape[0]
             effect = _batched(cls, **values, offset=np.zeros(count))
