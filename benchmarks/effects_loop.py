@@ -37,12 +37,11 @@ def main(argv=None) -> int:
     import jax
 
     jax.config.update("jax_enable_x64", True)
+    import numpy as np
     import pandas as pd
     from partial_rows import append, open_rows
 
     import jaxcascade as jc
-    import numpy as np
-
     from jaxcascade._measured._testing import (
         INTEGRATING,
         UNDECLARED,

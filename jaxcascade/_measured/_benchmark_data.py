@@ -170,6 +170,9 @@ def benchmark_data(name: str, root: str | os.PathLike, *, loader: str = "1.0.1")
         for (bench, test_name), values in _TABLE.items()
         if bench == name
     }
+    for (bench, test_name), values in _PARTIAL.items():
+        if bench == name:
+            published.setdefault(test_name, {}).update(values)
     return Benchmark(
         name=name,
         sampling_time=float(sampling_time),
@@ -334,6 +337,43 @@ def _wiener_hammerstein(files: _Files):
     train = [m.record("train", "uBenchMark", "yBenchMark", u, y, None, 100000, outer=used)]
     test = [m.record("test", "uBenchMark", "yBenchMark", u, y, 100000, None, outer=used)]
     return 1 / m.scalar("fs"), train, test
+
+
+# The two benchmarks kept back: the rows of Champneys et al. (2024) that issue 67 quotes
+# (linear state space and polynomial NARX), test RMSE in the benchmark's unit.
+_PARTIAL = {
+    ("Cascaded_Tanks", "test"): {"linear_state_space": 0.588, "polynomial_narx": 0.413},
+    ("WienerHammerBenchMark", "test"): {"linear_state_space": 43.4, "polynomial_narx": 27.3},
+}
+
+# What each benchmark's system contains (its description, the shared README and the
+# benchmarks' own documents), said where the final model stays above the polynomial
+# NARX baseline: the mechanism the loop's library does not hold.
+MECHANISMS = {
+    "EMPS": (
+        "an integrating axis held in a closed position loop with Coulomb and viscous "
+        "friction: the loop models the velocity with friction, but the position's drift "
+        "over the test record is held by the feedback that the closed loop adds, which "
+        "no open-loop path from the force holds"
+    ),
+    "CED": (
+        "two motors driving a pulley through a flexible belt, the speed read by a "
+        "sign-blind, quantised pulse counter: the belt's slip and tension, a dynamics "
+        "that changes with the load, are not in the library"
+    ),
+    "Silverbox": (
+        "a cubic spring in feedback around a second-order system, extrapolated in "
+        "amplitude on the arrow test: a feedback polynomial of higher degree than three"
+    ),
+    "Cascaded_Tanks": (
+        "square-root outflows inside the dynamics of two tanks and an overflow of the "
+        "upper one that depends on its level, a saturation of a state, not of the output"
+    ),
+    "WienerHammerBenchMark": (
+        "two linear blocks of third order each around a diode-like static curve: the "
+        "library's output dynamics hold two poles, fewer than the second block has"
+    ),
+}
 
 
 _READERS = {

@@ -26,7 +26,7 @@ import numpy as np
 
 from .. import _defaults
 from .._data import Record, Scaling, record_from_arrays
-from ._benchmark_data import Benchmark
+from ._benchmark_data import MECHANISMS, Benchmark
 
 # The rule that cuts estimation and validation records from a benchmark's training data,
 # the same for every benchmark (`benchmark_split`).
@@ -189,8 +189,11 @@ def benchmark_summary(records: BenchmarkRecords, scores, scaling: Scaling, init_
     """The `"benchmark"` block of the loop's JSON: per official test record the test RMSE
     in the benchmark's unit (initialised simulation over `y[n_init:]`), NRMSE and fit %
     of the final model, the declared cascade's and the ARX peer's RMSE, and the
-    published baselines. `scores`: the loop's `_scoring.RecordScore`s (models "final
-    model", "declared cascade", "linear ARX"), their RMSE in model units."""
+    published baselines, the linear output-error peer's where it was scored, and where the
+    final model stays above the published polynomial NARX, a sentence naming the
+    mechanism the system has (`_benchmark_data.MECHANISMS`). `scores`: the loop's
+    `_scoring.RecordScore`s (models "final model", "declared cascade", "linear ARX",
+    "linear output-error"), their RMSE in model units."""
     from .._metrics import fit_percent
 
     bench = records.benchmark
@@ -203,8 +206,11 @@ def benchmark_summary(records: BenchmarkRecords, scores, scaling: Scaling, init_
             if s.role == "test" and s.record == f"{bench.name} {record.name}"
         }
         final, declared, arx = row["final model"], row["declared cascade"], row["linear ARX"]
+        oe = row.get("linear output-error")
         published = dict(bench.published.get(record.name, {}))
         best_linear = bench.best_linear(record.name)
+        narx = published.get("polynomial_narx")
+        above_narx = narx is not None and final.rmse * factor > narx
         tests.append(
             {
                 "record": record.name,
@@ -216,6 +222,17 @@ def benchmark_summary(records: BenchmarkRecords, scores, scaling: Scaling, init_
                 "arx_test_rmse": arx.rmse * factor,
                 "arx_test_nrmse": arx.error,
                 "beats_arx": bool(final.rmse < arx.rmse),
+                "oe_test_rmse": None if oe is None else oe.rmse * factor,
+                "beats_oe": None if oe is None else bool(final.rmse <= oe.rmse),
+                "polynomial_narx_published": narx,
+                # where the final model stays above the polynomial NARX: what is missing
+                "missing_mechanism": (
+                    f"{record.name}: {final.rmse * factor:.4g} {bench.unit} against the "
+                    f"polynomial NARX's {narx:.4g}: the system has "
+                    f"{MECHANISMS[bench.name]}."
+                    if above_narx and bench.name in MECHANISMS
+                    else None
+                ),
                 "best_linear_published": best_linear,
                 "beats_best_linear": None
                 if best_linear is None

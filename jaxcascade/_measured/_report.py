@@ -200,9 +200,16 @@ def _benchmark_table(bench: dict) -> list[str]:
     for label, key in (
         ("declared cascade", "declared_test_rmse"),
         ("final model", "test_rmse"),
+        ("linear output-error peer (this run)", "oe_test_rmse"),
         ("linear ARX peer (this run)", "arx_test_rmse"),
     ):
-        lines.append(f"| {label} | " + " | ".join(f"{t[key]:.4g}" for t in tests) + " |")
+        if all(t.get(key) is None for t in tests):
+            continue
+        lines.append(
+            f"| {label} | "
+            + " | ".join("-" if t.get(key) is None else f"{t[key]:.4g}" for t in tests)
+            + " |"
+        )
     published = sorted({k for t in tests for k in t["published"]})
     for key in published:
         values = [t["published"].get(key) for t in tests]
@@ -223,6 +230,10 @@ def _benchmark_table(bench: dict) -> list[str]:
         f" decimation {bench['decimation']} ({bench['decimation_rule']}).",
         "",
     ]
+    missing = [t["missing_mechanism"] for t in tests if t.get("missing_mechanism")]
+    if missing:
+        lines += ["Where the final model stays above the polynomial NARX baseline:", ""]
+        lines += [f"- {sentence}" for sentence in missing] + [""]
     return lines
 
 

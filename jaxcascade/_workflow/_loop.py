@@ -500,6 +500,11 @@ def loop_records(
             lambda u, y, start, n: arx.simulate(u, y, start)[start:],
         ),
     }
+    if result.floor is not None:  # the linear output-error peer (`_oe`, the loop's floor)
+        models["linear output-error"] = (
+            lambda u, m=result.floor.model: simulated_output(m, u),
+            lambda u, y, start, n, m=result.floor.model: initialised_output(m, u, y, start, n),
+        )
     if integrating is not None:
         # scored as measured, the output integrated back
         models = {name: integrated(*pair) for name, pair in models.items()}
