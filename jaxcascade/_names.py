@@ -20,7 +20,10 @@ ESTIMATORS = {
 EFFECTS = {
     "output_offset": "constant offset added to the output: y + d",
     "input_delay": "pure input delay of d samples: u(t - d)",
-    "dynamics_order": "one more pole (p + 1) or zero (r + 1) in the linear block",
+    "dynamics_order": (
+        "more poles or zeros in the linear block: one more (p + 1, r + 1), or up to the "
+        "orders of the linear model the validation records choose"
+    ),
     "pwl_segment": "one more breakpoint (segment) in the static input nonlinearity",
     "output_saturation": "output clipped to [lower, upper] (a sensor or actuator limit)",
     "output_drift": "linear drift of the output over the record: y + d t / 1000 (t in samples)",
@@ -59,8 +62,9 @@ EFFECTS = {
         "continuous dynamics)"
     ),
     "velocity_friction": (
-        "Coulomb friction on the velocity of an integrating plant: x(t) - f+ s+ - f- s-, "
-        "s = tanh(x(t-1) / eps) (positioning systems; with --integrate)"
+        "Coulomb friction on the velocity of an integrating plant: x(t) - clip(x(t), -f-,"
+        " f+), it stops a slow motion, never reverses it (positioning systems; "
+        "--integrate)"
     ),
     "output_polynomial": (
         "static polynomial map of the output: y + c0 + c2 y^2 + c3 y^3 (a Wiener "
@@ -71,8 +75,8 @@ EFFECTS = {
         "|speed|; a rectifier)"
     ),
     "output_dynamics": (
-        "linear dynamics after the static output map: (1 + beta q^-1 ..) / (1 + alpha "
-        "q^-1 ..) (a Wiener-Hammerstein sandwich)"
+        "linear dynamics after the cascade and its output map: (1 + beta q^-1 ..) / (1 + "
+        "alpha q^-1 ..) y + c (a Wiener-Hammerstein sandwich)"
     ),
 }
 
