@@ -68,6 +68,8 @@ ALLOWED: list[tuple[str, str]] = [
     (r"(?:within|than) 0\.05\b", "the recovery tolerance: every parameter within 0.05"),
     (r"\bpoles? \d\.\d+", "the pole of a simulated noise, a setting of the experiment"),
     (r"\d+ % lower NRMSE", "the loop's minimum gain (--min-gain)"),
+    (r"least 2 % of (?:the residual|it)", "the threshold of `_feedback.MIN_EXPLAINED`"),
+    (r"relative 1e-9", "the tolerance a test states for tables compared across backends"),
     (r"mean \(NRMSE 1\)", "the mean's NRMSE, 1 by definition"),
     (r"(?:within|than|or) 1 %", "the sample-period tolerance and a refit's margin"),
     (r"fewer than 5 %", "scaling auto's test of a one-sided input"),
