@@ -36,9 +36,9 @@ def issue_records(example: int, snr: float):
     """The literal estimator on `reproduce`'s records, seeds 0..39: one row each."""
     import jax
 
-    from jaxcascade._cli._reproduce import run_example
     from jaxcascade._status import Status
     from jaxcascade._system._examples import example as paper_example
+    from jaxcascade._workflow._reproduce import run_example
 
     ex = paper_example(example)
     rows = []

@@ -3,7 +3,7 @@ its update (`_estimator._rls`), systems that change (`_changing`) and the tracki
 
 The plain NumPy loop of the same recursion (`_benchmark._recursive_baseline`) is the
 oracle of the scan. Noise-free records are those of `jaxcascade reproduce --example N
---snr inf` (seed 0: `_cli._reproduce.run_example`'s draw).
+--snr inf` (seed 0: `_workflow._reproduce.run_example`'s draw).
 """
 
 import equinox as eqx

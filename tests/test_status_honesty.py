@@ -2,9 +2,9 @@
 window, relative to the recursion's standard errors, and at the noise level it
 estimates; otherwise `tracking`. The word never describes an estimate far from the
 truth on a noise-free record. Records are those `jaxcascade reproduce --example N --seed
-S --snr SNR` draws (`_cli._reproduce.run_example`). `results/status_honesty.md` counts
-every estimator's statuses against the truth over many records; here, the cases the
-issue names.
+S --snr SNR` draws (`_workflow._reproduce.run_example`). `results/status_honesty.md`
+counts every estimator's statuses against the truth over many records; here, the cases
+the issue names.
 """
 
 import functools

@@ -1,70 +1,17 @@
-"""`jaxcascade bench`: the performance benchmark (`_benchmark`)."""
+"""`jaxcascade bench`: the performance benchmark (`_benchmark`), its text report
+(`_benchmark._text`) printed or its summary as JSON, and its record written as CSV."""
 
 from __future__ import annotations
 
-import csv
-import json
 import pathlib
-import time
 
 from .._names import BENCH_SYSTEMS
 from ._common import CLIError, examples, strict_json, writable_folder
 
 
-def _report(r: dict) -> str:
-    return "\n".join(
-        [
-            f"workload: Example {r['example']}, N = {r['n']}, SNR {r['snr']:g}, "
-            f"{r['iterations']} iterations, {r['realisations']} realisations ({r['dtype']})",
-            f"device: {r['device']}",
-            f"jaxcascade ({r['backend']} normal equations, {r['workers']} host thread(s)): "
-            f"{r['fits_per_s']:.1f} fits/s "
-            f"({r['run_s']:.3f} s per run; compile {r['compile_s']:.2f} s, kernel build "
-            f"{r['kernel_build_s']:.2f} s; statuses {r['status_counts']})",
-            f"numpy baseline: {r['baseline_fits_per_s']:.2f} fits/s "
-            f"({r['baseline_realisations']} realisations in {r['baseline_s']:.2f} s, "
-            f"{r['baseline_threads']} BLAS thread(s))",
-            f"ratio to baseline: {r['ratio']:.1f}",
-            f"floor: {r['flops_per_fit'] / 1e6:.2f} MFlop per fit ({r['floor_count']}) at "
-            f"{r['matmul_gflops']:.1f} "
-            f"GFlop/s ({r['matmul_backend']} float64 matmul, {r['matmul_size']}^3) = "
-            f"{r['floor_fits_per_s']:.0f} fits/s; fraction reached {r['floor_fraction']:.3f}",
-            f"peak memory: {r['peak_mem_mb']:.0f} MB (peak RSS after the batched run)",
-            f"load average as the timed runs started: {r['load']:.2f}",
-        ]
-    )
-
-
-def _write_csv(record: dict, path: pathlib.Path) -> None:
-    row = {key: value for key, value in record.items() if key != "status_counts"}
-    if "status_counts" in record:
-        row["status_counts"] = json.dumps(record["status_counts"])
-    row["jax_version"] = __import__("jax").__version__
-    row["date"] = time.strftime("%Y-%m-%dT%H:%M:%S")
-    with open(path, "w", newline="") as file:
-        writer = csv.DictWriter(file, fieldnames=list(row))
-        writer.writeheader()
-        writer.writerow(row)
-
-
-def _robust_report(r: dict) -> str:
-    return "\n".join(
-        [
-            f"workload: {r['estimator']} on {r['system']}, N = {r['n']}, SNR {r['snr']:g}, "
-            f"{r['realisations']} realisations",
-            f"device: {r['device']}",
-            f"jaxcascade: {r['fits_per_s']:.1f} fits/s ({r['run_s']:.2f} s per run; compile "
-            f"{r['compile_s']:.2f} s); recovered {r['recovered']:.3f} (converged "
-            f"{r['converged']:.3f}, adaptive path {r['adaptive_fraction']:.3f})",
-            f"scipy baseline: {r['baseline_fits_per_s']:.3f} fits/s "
-            f"({r['baseline_realisations']} realisations in {r['baseline_s']:.1f} s)",
-            f"ratio to baseline: {r['ratio']:.1f}",
-        ]
-    )
-
-
 def run_robust_bench(args) -> int:
     from .._benchmark import _robust as robust_bench
+    from .._benchmark._text import robust_text, write_csv
     from .._system._model import Orders
 
     n = args.n if args.n is not None else robust_bench.system_defaults(args.system)[0]
@@ -86,31 +33,14 @@ def run_robust_bench(args) -> int:
         args.system, realisations, baseline, n, args.repeats, args.seed, args.estimator
     )
     if out is not None:
-        _write_csv(record, out)
-    print(strict_json(robust_bench.summary(record)) if args.json else _robust_report(record))
+        write_csv(record, out)
+    print(strict_json(robust_bench.summary(record)) if args.json else robust_text(record))
     return 0
-
-
-def _recursive_report(r: dict) -> str:
-    return "\n".join(
-        [
-            f"workload: recursive over Example {r['example']}, N = {r['n']}, SNR {r['snr']:g}, "
-            f"{r['realisations']} records at once",
-            f"device: {r['device']}",
-            f"jaxcascade: {r['updates_per_s']:.3g} sample updates/s ({r['run_s']:.3f} s per "
-            f"run; compile {r['compile_s']:.2f} s; statuses {r['status_counts']})",
-            f"numpy loop: {r['baseline_updates_per_s']:.3g} sample updates/s "
-            f"({r['baseline_realisations']} records in {r['baseline_s']:.2f} s; largest "
-            f"difference of the estimates {r['baseline_max_difference']:.1e})",
-            f"ratio to the numpy loop: {r['ratio']:.0f}",
-            f"real-time factor at {r['sample_rate_hz']:g} Hz per record: "
-            f"{r['real_time_factor']:.0f}",
-        ]
-    )
 
 
 def run_recursive_bench(args) -> int:
     from .._benchmark import _recursive as recursive_bench
+    from .._benchmark._text import recursive_text, write_csv
     from .._system._examples import example as get_example
 
     ex = get_example(args.example)
@@ -142,13 +72,14 @@ def run_recursive_bench(args) -> int:
         realisations, n, args.example, baseline, args.repeats, args.seed, args.sample_rate
     )
     if out is not None:
-        _write_csv({k: v for k, v in record.items() if k != "settings"}, out)
-    print(strict_json(recursive_bench.summary(record)) if args.json else _recursive_report(record))
+        write_csv({k: v for k, v in record.items() if k != "settings"}, out)
+    print(strict_json(recursive_bench.summary(record)) if args.json else recursive_text(record))
     return 0
 
 
 def run_bench(args) -> int:
     # imported here, not at the top: `--help` answers without importing JAX
+    from .._benchmark._text import literal_text, write_csv
     from .._benchmark._timing import run_benchmark, summary
     from .._estimator import lookup
     from .._system._examples import example as get_example
@@ -203,8 +134,8 @@ def run_bench(args) -> int:
         args.workers,
     )
     if out is not None:
-        _write_csv(record, out)
-    print(strict_json(summary(record)) if args.json else _report(record))
+        write_csv(record, out)
+    print(strict_json(summary(record)) if args.json else literal_text(record))
     return 0
 
 
