@@ -27,8 +27,9 @@ it leave a coloured error correlated with the input (`autocorrelation`,
 `cross_correlation`, `spectrum`). Starts: the polynomial's coefficients regressed on the
 current output's powers (not tried where they explain less than `_feedback.MIN_EXPLAINED`
 of the residual), the fold at the lower quantiles of the current output (where a
-sign-blind output touches zero), the dynamics at the identity, at two stable pairs and
-at the filter from the current output to the measured one (equation error).
+sign-blind output touches zero), the dynamics at the filter from the current output to
+the measured one (equation error), or where none is found at the identity and at two
+stable pairs.
 """
 
 from __future__ import annotations
@@ -192,11 +193,12 @@ class OutputDynamics(Effect):
                 values["poles"][1:] = [[-0.5, 0.0625], [0.3, 0.02]]
             found = _filter_fit(model, records, k)
             if found is not None:
-                # the filter from the current output to the measured one, and the identity
-                # (the two stable pairs are the starts where no such filter is found)
-                values = {
-                    name: np.concatenate([found[name][None], values[name][:1]]) for name in values
-                }
+                # the filter from the current output to the measured one alone: with the
+                # identity beside it (a start more in the batched refit), the input-delay
+                # loop of results/loop_speed.md was 1.114 times f8b1a9a's warm, with this
+                # one start 1.056 (benchmarks/loop_compare.py f8b1a9a --runs 3 --cache
+                # warm), and the synthetic record still gets output_dynamics (test_loop)
+                values = {name: found[name][None] for name in values}
             count = values["zeros"].shape[0]
             effect = _batched(cls, **values, offset=np.zeros(count))
             starts.append(Start(f"{cls.name}:{k}", model.orders, _repeat(model, count), effect))
