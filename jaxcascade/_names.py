@@ -78,6 +78,10 @@ EFFECTS = {
         "linear dynamics after the cascade and its output map: (1 + beta q^-1 ..) / (1 + "
         "alpha q^-1 ..) y + c (a Wiener-Hammerstein sandwich)"
     ),
+    "inner_polynomial": (
+        "static polynomial map between the cascade and output_dynamics added before it: "
+        "y + c0 + c2 y^2 + c3 y^3 (the static part of a Wiener-Hammerstein sandwich)"
+    ),
 }
 
 # the loop's noise model, considered beside the effects, and its description

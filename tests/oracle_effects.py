@@ -47,9 +47,11 @@ The definitions, and where they are documented:
   `velocity_friction` `-clip(x, -|f-|, |f+|)` of the value `x(t)` has so far (the
   linear recursion's plus the terms of the effects before it).
 - the maps after the cascade (`_effects/_wiener.py`): `output_polynomial` `y + c0 + c2
-  y^2 + c3 y^3`; `output_fold` `c0 + c1 sqrt((y - s)^2 + EPS^2) + c2 (y - s)^2`, EPS =
-  1e-3 (`FOLD_EPS`); `output_dynamics` `w(t) = y(t) + sum_i beta_i y(t-i)`, `out(t) =
-  w(t) - sum_j alpha_j out(t-j)`, from rest, plus `offset`.
+  y^2 + c3 y^3`, and `inner_polynomial` the same map, acting just before the first
+  `output_dynamics` when added after it; `output_fold` `c0 + c1 sqrt((y - s)^2 +
+  EPS^2) + c2 (y - s)^2`, EPS = 1e-3 (`FOLD_EPS`); `output_dynamics` `w(t) = y(t) +
+  sum_i beta_i y(t-i)`, `out(t) = w(t) - sum_j alpha_j out(t-j)`, from rest, plus
+  `offset`.
 - `general_backlash` (`_effects/_curved.py`, `docs/general_backlash.md`): the cascade's
   backlash with curved branches on its own `cL`, `mR`, `cR`:
   `fL = (x + cL) + sum_i curveL[i-2] (x + cL)^i`, `fR = mR (x - cR) + sum_i
@@ -256,7 +258,7 @@ def linear_with_terms(P: dict, v, effects) -> np.ndarray:
 
 
 def _output_effect(name, p, y, x):
-    if name == "output_polynomial":
+    if name in ("output_polynomial", "inner_polynomial"):
         c0, c2, c3 = p["coefficients"]
         return y + c0 + c2 * y**2 + c3 * y**3
     if name == "output_fold":
@@ -313,6 +315,7 @@ KNOWN = (
     "output_polynomial",
     "output_fold",
     "output_dynamics",
+    "inner_polynomial",
     *STRUCTURAL,
 )
 
@@ -344,6 +347,14 @@ def simulate(model, u, effective: dict | None = None) -> np.ndarray:
         if name == "general_backlash":  # in place of the cascade's straight backlash
             curves = (np.atleast_1d(p["curveL"]), np.atleast_1d(p["curveR"]))
             y = general_backlash(x, P["cL"], P["mR"], P["cR"], *curves)
+    # in the order added, but an inner_polynomial acts just before the first
+    # output_dynamics (the static part of the sandwich)
+    block = next((i for i, (name, _) in enumerate(effects) if name == "output_dynamics"), None)
+    if block is not None:
+        inner = [e for i, e in enumerate(effects) if i > block and e[0] == "inner_polynomial"]
+        rest = [e for i, e in enumerate(effects) if not (i > block and e[0] == "inner_polynomial")]
+        at = next(i for i, (name, _) in enumerate(rest) if name == "output_dynamics")
+        effects = rest[:at] + inner + rest[at:]
     for name, p in effects:
         y = _output_effect(name, p, y, x)
         path = _parallel(name, p, u_model)

@@ -24,10 +24,13 @@ from jaxcascade._measured._effects import (
     CurvedBacklash,
     DahlFriction,
     ExtendedModel,
+    InnerPolynomial,
     InputBacklash,
     InputDelay,
+    OutputDynamics,
     OutputFeedthrough,
     OutputOffset,
+    OutputPolynomial,
     PrandtlIshlinskii,
     SlackFriction,
     VelocityFriction,
@@ -73,6 +76,11 @@ MODELS = {
     # Coulomb friction on Example 1's x taken as a velocity (`_testing.INTEGRATING`'s
     # forces)
     "velocity_friction": lambda: _with(VelocityFriction(jnp.array([0.3, 0.4]))),
+    # added after the output dynamics, acting before them: the sandwich
+    "inner_polynomial": lambda: _with(
+        OutputDynamics(jnp.array([0.4]), jnp.array([-0.6]), jnp.asarray(0.0)),
+        InnerPolynomial(jnp.array([0.0, 0.15, -0.08])),
+    ),
 }
 
 
@@ -171,6 +179,23 @@ def test_effects_compose_in_order():
         np.max(np.abs(oracle_effects.simulate(swapped, u) - oracle_effects.simulate(model, u)))
         > 0.01
     )
+
+
+def test_an_inner_map_acts_before_the_output_dynamics():
+    # the same map added after output_dynamics: inner_polynomial goes between the two
+    # linear blocks (as if added before them), output_polynomial after the second
+    dynamics = OutputDynamics(jnp.array([0.4]), jnp.array([-0.6]), jnp.asarray(0.0))
+    coefficients = jnp.array([0.0, 0.15, -0.08])
+    inner = _with(dynamics, InnerPolynomial(coefficients))
+    before = _with(OutputPolynomial(coefficients), dynamics)
+    after = _with(dynamics, OutputPolynomial(coefficients))
+    u = jnp.asarray(_input())
+    np.testing.assert_allclose(
+        simulate_extended(inner, u), simulate_extended(before, u), atol=1e-12
+    )
+    assert np.max(np.abs(simulate_extended(inner, u) - simulate_extended(after, u))) > 0.01
+    assert inner.structure().endswith("backlash -> inner_polynomial -> output_dynamics -> y")
+    _compare(inner)
 
 
 def test_operators_of_the_reference_on_a_closed_form():

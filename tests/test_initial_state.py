@@ -19,6 +19,7 @@ from jaxcascade._measured._effects import (
     DirectTerm,
     DynamicsOrder,
     ExtendedModel,
+    InnerPolynomial,
     InputBacklash,
     InputDelay,
     NonlinearFeedback,
@@ -80,6 +81,7 @@ INSTANCES = {
     "output_polynomial": OutputPolynomial(jnp.array([0.0, 0.15, -0.08])),
     "output_fold": OutputFold(jnp.array([0.0, 1.0, 0.0, -0.4])),
     "output_dynamics": OutputDynamics(jnp.array([0.4]), jnp.array([-0.6]), jnp.asarray(0.1)),
+    "inner_polynomial": InnerPolynomial(jnp.array([0.0, 0.15, -0.08])),
 }
 
 

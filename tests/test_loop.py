@@ -151,6 +151,26 @@ def test_loop_names_strongly_coloured_noise_on_the_prediction_error(library):
     assert result.after.tests.whiteness_ok  # the tests after it see the whitened residual
 
 
+def test_loop_builds_a_sandwich_whichever_block_comes_first():
+    # Example 1, then the static map of output_polynomial's record, then the dynamics of
+    # output_dynamics's (a Wiener-Hammerstein sandwich around the backlash): the loop may
+    # add either block first; the map ends between the two linear blocks either way
+    # (output_polynomial added before output_dynamics, or inner_polynomial after it)
+    polynomial = UNDECLARED["output_polynomial"]()[0]
+    dynamics = UNDECLARED["output_dynamics"]()[0].effects[0]
+    model = polynomial.with_(effects=(*polynomial.effects, dynamics))
+    u, y = undeclared_record(model, jax.random.PRNGKey(1), N, SNR)
+    u_val, y_val = undeclared_record(model, jax.random.PRNGKey(2), N, SNR)
+    library = ("output_polynomial", "output_dynamics", "inner_polynomial", *RIVALS)
+    result = model_error_loop(u, y, u_val, y_val, jc.Orders(), effects=library, init_samples=0)
+    assert sorted(result.added) in (
+        ["output_dynamics", "output_polynomial"],
+        ["inner_polynomial", "output_dynamics"],
+    ), result.added
+    assert result.final.structure().endswith("_polynomial -> output_dynamics -> y")
+    assert result.after.error <= 1.5 / SNR
+
+
 def test_every_effect_declares_a_signature():
     tests = {
         "autocorrelation",
@@ -232,6 +252,9 @@ def test_every_effect_of_the_library_has_an_undeclared_record():
         "dahl_friction",
         "input_backlash",
         "general_backlash",
+        # the static part of a sandwich whose second block came first: its record has
+        # two effects (test_loop_builds_a_sandwich_whichever_block_comes_first)
+        "inner_polynomial",
     }
     assert records | own_tests == {*EFFECTS, ARNoise.name}
     assert not records & own_tests

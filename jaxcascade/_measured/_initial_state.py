@@ -59,7 +59,14 @@ from .._system._general_backlash import general_backlash
 from .._system._model import CascadeParams
 from .._system._simulate import _poles_blocked, _poles_scan, backlash_switches, pwl
 from ._effects import choose, unchoose_states
-from ._effects._base import EffectState, ExtendedModel, backlash_of, recent, recursion_terms
+from ._effects._base import (
+    EffectState,
+    ExtendedModel,
+    backlash_of,
+    output_order,
+    recent,
+    recursion_terms,
+)
 from ._effects._recursion import linear_with_terms
 
 # Start positions of each operator in an initial-state fit: fractions of its
@@ -157,7 +164,8 @@ def simulate_from(model: ExtendedModel, u, state: ModelState, at=None):
         v, x = jnp.zeros_like(u), u
         y_cascade = jnp.zeros_like(u) + 0 * c.y_prev
     y = y_cascade
-    for i, effect in enumerate(model.effects):
+    for i in output_order(model.effects):
+        effect = model.effects[i]
         y, states[i] = effect.output_with_state(y, x, states[i], at)
         path, states[i] = effect.parallel_with_state(u_model, states[i], at)
         if path is not None:

@@ -108,6 +108,9 @@ from ._hysteresis import (
     SlackFriction as SlackFriction,
 )
 from ._wiener import (
+    InnerPolynomial as InnerPolynomial,
+)
+from ._wiener import (
     OutputDynamics as OutputDynamics,
 )
 from ._wiener import (
@@ -140,6 +143,7 @@ EFFECTS: dict[str, type[Effect]] = {
         OutputPolynomial,
         OutputFold,
         OutputDynamics,
+        InnerPolynomial,
     )
 }
 # tried only when a test of their signature failed: the hysteresis paths and the curved

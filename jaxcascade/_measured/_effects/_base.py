@@ -57,6 +57,12 @@ class Effect(eqx.Module):
     # squares on the residual (`fit_records`), alternating with refits of the cascade
     # (`_loop.fit_parallel`), not by a Levenberg-Marquardt refit of the extended model.
     linear: ClassVar[bool] = False
+    # The output chain's order is the order the effects were added in, except that an
+    # `inner` map acts just before the first effect that is a `second_block` (a static
+    # map added after the output dynamics goes between the two linear blocks: the
+    # Wiener-Hammerstein sandwich, `_wiener`); `output_order`.
+    inner: ClassVar[bool] = False
+    second_block: ClassVar[bool] = False
 
     def input(self, u):
         return u
@@ -227,8 +233,9 @@ class ExtendedModel(eqx.Module):
                 line = f"{line} (+ {' + '.join(f'{p}(u)' for p in paths)})"
         else:
             line = " -> ".join(chain + [" + ".join(paths) or "0"])
-        for name in outputs:
-            line += f" -> {name}"
+        for i in output_order(self.effects):
+            if self.effects[i].name in outputs:
+                line += f" -> {self.effects[i].name}"
         if self.noise.order:
             line += f" -> + AR({self.noise.order}) noise"
         return line + " -> y"
@@ -240,6 +247,20 @@ class ExtendedModel(eqx.Module):
     @property
     def names(self) -> tuple[str, ...]:
         return tuple(effect.name for effect in self.effects)
+
+
+def output_order(effects) -> list[int]:
+    """The indices of `effects` in the order their outputs (and parallel paths) act: the
+    order they were added in, with every `Effect.inner` map moved to just before the
+    first `Effect.second_block` effect (none moves where there is none)."""
+    order = list(range(len(effects)))
+    block = next((i for i in order if type(effects[i]).second_block), None)
+    if block is None:
+        return order
+    moved = [i for i in order if i > block and type(effects[i]).inner]
+    rest = [i for i in order if i not in moved]
+    at = rest.index(block)
+    return rest[:at] + moved + rest[at:]
 
 
 def backlash_of(model: ExtendedModel) -> GeneralBacklash | None:
@@ -286,7 +307,8 @@ def simulate_with_switches(model: ExtendedModel, u):
     else:
         x, y = u, jnp.zeros_like(u)
     y_cascade = y
-    for effect in model.effects:
+    for i in output_order(model.effects):
+        effect = model.effects[i]
         y = effect.output(y, x)
         path = effect.parallel(u_model)
         if path is not None:

@@ -12,6 +12,11 @@ the sensor or the output stage, and with dynamics after it:
   the level `s`: a sensor blind to the sign (a pulse counter measuring the magnitude of
   a speed, CED's belt drive), a rectifier, with a smooth correction. The absolute value
   is smoothed over `EPS` (model units) so that its derivative is finite at the fold.
+- `InnerPolynomial` (`inner_polynomial`): the same map, but between the cascade and the
+  output dynamics where those were added first (`Effect.inner`, `_base.output_order`):
+  the loop adds one effect a round, and on a sandwich the second block may explain more
+  of the residual than the static map and come first; without it the static map could
+  then only go after the second block.
 - `OutputDynamics` (`output_dynamics`): a second linear block after the static part,
   `y_out = (1 + beta_1 q^-1 + ..) / (1 + alpha_1 q^-1 + ..) y + c` (unit gain at high
   frequency: the cascade holds the gain; a block of unit gain at zero frequency instead
@@ -38,6 +43,7 @@ from typing import ClassVar
 
 import jax.numpy as jnp
 import numpy as np
+import scipy.signal
 from jaxtyping import Array, Float
 
 from ..._system._simulate import _poles_blocked, _poles_scan
@@ -132,6 +138,7 @@ class OutputFold(Effect):
 
 
 class OutputDynamics(Effect):
+    second_block: ClassVar[bool] = True
     name: ClassVar[str] = "output_dynamics"
     signature: ClassVar[tuple[str, ...]] = ("autocorrelation", "cross_correlation", "spectrum")
     description: ClassVar[str] = (
@@ -238,3 +245,44 @@ def _filter_fit(model, records, k: int):
     if not abs(b[0]) > 1e-6 * np.max(np.abs(b)):
         return None
     return {"zeros": b[1:] / b[0], "poles": alpha}
+
+
+class InnerPolynomial(OutputPolynomial):
+    name: ClassVar[str] = "inner_polynomial"
+    description: ClassVar[str] = (
+        "static polynomial map between the cascade and output_dynamics added before it: "
+        "y + c0 + c2 y^2 + c3 y^3 (the static part of a Wiener-Hammerstein sandwich)"
+    )
+    inner: ClassVar[bool] = True
+
+    @classmethod
+    def starts_records(cls, model, records):
+        at = next((i for i, e in enumerate(model.effects) if type(e).second_block), None)
+        if at is None or _static(model):
+            return []
+        block = model.effects[at]
+        # the signal entering the output dynamics: the model without them and without
+        # the output maps added after them
+        before = model.with_(
+            effects=tuple(
+                e for i, e in enumerate(model.effects) if i < at or type(e).output is Effect.output
+            )
+        )
+        b = np.concatenate([[1.0], np.asarray(block.zeros, float)])
+        a = np.concatenate([[1.0], np.asarray(block.poles, float)])
+        rows, targets = [], []
+        for u, _, res in records:
+            h = np.asarray(simulate_padded(before, np.asarray(u, float))[0], float)
+            # the powers of that signal through the second block (from rest, as it runs)
+            columns = [np.ones_like(h), h**2, h**3]
+            rows.append(np.stack([scipy.signal.lfilter(b, a, c) for c in columns], axis=1))
+            targets.append(np.asarray(res, float))
+        X, r = np.concatenate(rows), np.concatenate(targets)
+        if not np.all(np.isfinite(X)) or X.shape[0] < 30:
+            return []
+        fit, share = explained(X, r)
+        if share < MIN_EXPLAINED:  # not what the residual shows (`_feedback`)
+            return []
+        values = np.array([fit, 0.5 * fit, np.zeros(3)])
+        effect = _batched(cls, coefficients=values)
+        return [Start(cls.name, model.orders, _repeat(model, len(values)), effect)]
