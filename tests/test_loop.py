@@ -161,8 +161,12 @@ def test_loop_builds_a_sandwich_whichever_block_comes_first():
     model = polynomial.with_(effects=(*polynomial.effects, dynamics))
     u, y = undeclared_record(model, jax.random.PRNGKey(1), N, SNR)
     u_val, y_val = undeclared_record(model, jax.random.PRNGKey(2), N, SNR)
-    library = ("output_polynomial", "output_dynamics", "inner_polynomial", *RIVALS)
-    result = model_error_loop(u, y, u_val, y_val, jc.Orders(), effects=library, init_samples=0)
+    # the three maps alone (the rivals of every record cost this default-run test 2 x
+    # the time and did not change what was added, seeds 1, 2)
+    library = ("output_polynomial", "output_dynamics", "inner_polynomial")
+    result = model_error_loop(
+        u, y, u_val, y_val, jc.Orders(), effects=library, init_samples=0, max_effects=2
+    )
     assert sorted(result.added) in (
         ["output_dynamics", "output_polynomial"],
         ["inner_polynomial", "output_dynamics"],
