@@ -62,6 +62,22 @@ def _static(model) -> bool:
     return any(isinstance(e, OutputPolynomial | OutputFold) for e in model.effects)
 
 
+def _polynomial_starts(cls, model, X, r) -> list[Start]:
+    """Starts of a polynomial map `cls` (`c0, c2, c3`) from the residual `r` regressed on
+    its terms `X` (columns: the constant and the squared and cubed signal, as the map
+    sees them): the fit, half of it and zero; none where the terms are not finite, the
+    records too short, or the fit explains less than `_feedback.MIN_EXPLAINED` of the
+    residual (not what the residual shows)."""
+    if not np.all(np.isfinite(X)) or X.shape[0] < 30:
+        return []
+    fit, share = explained(X, r)
+    if share < MIN_EXPLAINED:
+        return []
+    values = np.array([fit, 0.5 * fit, np.zeros(3)])
+    effect = _batched(cls, coefficients=values)
+    return [Start(cls.name, model.orders, _repeat(model, len(values)), effect)]
+
+
 class OutputPolynomial(Effect):
     name: ClassVar[str] = "output_polynomial"
     signature: ClassVar[tuple[str, ...]] = ("u2_e", "u2_e2", "e_eu", "level", "branch")
@@ -83,15 +99,7 @@ class OutputPolynomial(Effect):
             return []
         y = _outputs(model, records)
         r = np.concatenate([np.asarray(res, float) for _, _, res in records])
-        X = np.stack([np.ones_like(y), y**2, y**3], axis=1)
-        if not np.all(np.isfinite(X)) or X.shape[0] < 30:
-            return []
-        fit, share = explained(X, r)
-        if share < MIN_EXPLAINED:  # not what the residual shows (`_feedback`)
-            return []
-        values = np.array([fit, 0.5 * fit, np.zeros(3)])
-        effect = _batched(cls, coefficients=values)
-        return [Start(cls.name, model.orders, _repeat(model, len(values)), effect)]
+        return _polynomial_starts(cls, model, np.stack([np.ones_like(y), y**2, y**3], axis=1), r)
 
     @classmethod
     def starts(cls, model, u, y, residual):
@@ -277,12 +285,4 @@ class InnerPolynomial(OutputPolynomial):
             columns = [np.ones_like(h), h**2, h**3]
             rows.append(np.stack([scipy.signal.lfilter(b, a, c) for c in columns], axis=1))
             targets.append(np.asarray(res, float))
-        X, r = np.concatenate(rows), np.concatenate(targets)
-        if not np.all(np.isfinite(X)) or X.shape[0] < 30:
-            return []
-        fit, share = explained(X, r)
-        if share < MIN_EXPLAINED:  # not what the residual shows (`_feedback`)
-            return []
-        values = np.array([fit, 0.5 * fit, np.zeros(3)])
-        effect = _batched(cls, coefficients=values)
-        return [Start(cls.name, model.orders, _repeat(model, len(values)), effect)]
+        return _polynomial_starts(cls, model, np.concatenate(rows), np.concatenate(targets))
