@@ -45,6 +45,7 @@ from .._data import Scaling
 from .._system._model import CascadeParams, Orders
 from ._effects import EFFECTS, ExtendedModel
 from ._effects._curved import CurvedBacklash
+from ._effects._units import record_units
 from ._noise import ARNoise
 
 
@@ -139,12 +140,20 @@ def model_schema(
         if isinstance(effect, CurvedBacklash):
             terms = _curve_values(effect)
             entry_errors = {name: value_errors.get(name) for name in terms}
+            # the cascade's terms: in `estimates`, by `params_to_physical`
+            units = {name: f"output_power({name[2:]})" for name in terms}
+            parameters = {name: physical[name] for name in terms}
+            record_errors = {name: physical_errors.get(name) for name in terms}
         else:
             terms = effect.parameters()
             entry_errors = _effect_errors(effect, errors)
+            parameters, record_errors, units = record_units(effect, scaling, entry_errors)
         effects.append(
             {
                 "name": effect.name,
+                "units": units,
+                "parameters": parameters,
+                "std_errors": record_errors,
                 "parameters_model_units": terms,
                 "std_errors_model_units": entry_errors,
             }
