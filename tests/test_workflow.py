@@ -224,3 +224,193 @@ def test_loop_records_is_the_command(tmp_path, capsys):
     (row,) = simulation.to_dict()["records"]
     assert row["error"] == pytest.approx(command["test"][0]["error"], rel=1e-9)
     assert repr(simulation).startswith("Simulation(")
+
+
+def _effect_examples():
+    """One instance of every effect in `EFFECTS` with fields (model units), values that
+    keep Example 1's cascade with the effect stable on a uniform input."""
+    from jaxcascade._measured import _effects as E
+
+    a = jnp.asarray
+    return {
+        "output_offset": E.OutputOffset(a(0.3)),
+        "input_delay": E.InputDelay(a(2.0)),
+        "output_saturation": E.OutputSaturation(a(-0.4), a(0.5)),
+        "output_drift": E.OutputDrift(a(0.4)),
+        "output_feedthrough": E.OutputFeedthrough(a(-0.5)),
+        "slack_friction": E.SlackFriction(a(0.2), a(0.3), a(0.5), a(-0.4)),
+        "backlash_friction": E.BacklashFriction(a(0.1), a(2.0), a(0.3), a(0.2), a(0.1)),
+        "backlash_friction_contacts": E.BacklashFrictionContacts(
+            a(0.1), a(2.0), a(0.3), a(0.2), a(0.1)
+        ),
+        "prandtl_ishlinskii": E.PrandtlIshlinskii(
+            a([0.1, 0.3]), a([0.5, 0.9]), a(np.linspace(-0.3, 0.4, 10)), a(0.1)
+        ),
+        "dahl_friction": E.DahlFriction(a(3.0), a(0.4)),
+        "input_backlash": E.InputBacklash(a(0.1)),
+        "general_backlash": E.CurvedBacklash(a([-0.05, 0.02]), a([0.04, -0.01])),
+        "nonlinear_feedback": E.NonlinearFeedback(a([0.05, -0.02])),
+        "direct_term": E.DirectTerm(a([0.3])),
+        "velocity_friction": E.VelocityFriction(a([0.05, 0.08])),
+        "output_polynomial": E.OutputPolynomial(a([0.1, 0.2, -0.05])),
+        # the fold below the output's range: the smoothing EPS (model units) is then
+        # immaterial in either units
+        "output_fold": E.OutputFold(a([0.1, 1.0, 0.1, -20.0])),
+        "output_dynamics": E.OutputDynamics(a([0.2, 0.1]), a([-0.5, 0.0625]), a(0.1)),
+        "inner_polynomial": E.InnerPolynomial(a([0.1, 0.2, -0.05])),
+    }
+
+
+def test_every_effect_declares_the_unit_of_every_field():
+    """`Effect.units` names a known kind for each field of every effect in `EFFECTS`
+    (a new effect cannot forget), and nothing else; `_effect_examples` covers them."""
+    from jaxcascade._measured._effects import EFFECTS
+    from jaxcascade._measured._effects._units import element_kinds, valid_kind
+
+    examples = _effect_examples()
+    for name, kind in EFFECTS.items():
+        fields = {f.name for f in dataclasses.fields(kind)}
+        assert set(kind.units) == fields, name
+        for field, unit in kind.units.items():
+            units = unit if isinstance(unit, tuple) else (unit,)
+            assert all(valid_kind(u) for u in units), (name, field, unit)
+        if fields:
+            effect = examples[name]
+            for field in fields:
+                size = int(np.size(getattr(effect, field)))
+                assert len(element_kinds(kind.units[field], size)) == size, (name, field)
+
+
+def test_every_effect_s_fields_in_the_record_s_units_give_the_record_s_output():
+    """With only scales (no offsets), far from 1: Example 1 with one effect, its cascade
+    and the effect's fields written in the records' units by the schema (`estimates`,
+    the effect's `parameters`), simulated on the record's input, is the model's output
+    in model units times y_scale; for every effect of `EFFECTS` with fields."""
+    from jaxcascade._measured._effects import EFFECTS, ExtendedModel, simulate_padded
+    from jaxcascade._measured._schema import model_schema
+
+    # signals larger than in model units: the constants of the equations in model units
+    # (`FLOOR`, `EPS`) then weigh less in the record's form than in the model's
+    scaling = jc.Scaling(0.0, 250.0, 0.0, 50.0, "given")
+    params = jc.example(1).params()
+    u = np.asarray(jc.uniform_input(jax.random.PRNGKey(5), 200))
+    noise = jc.ARNoise(jnp.asarray([]))
+    for name, effect in _effect_examples().items():
+        model = ExtendedModel(params, (effect,), noise)
+        schema = model_schema(model, scaling)
+        (entry,) = schema["effects"]
+        orders = jc.Orders(**schema["orders"])
+        if name == "general_backlash":  # the cascade's own terms (the test above)
+            assert entry["parameters"] == {k: schema["estimates"][k] for k in entry["parameters"]}
+            assert entry["units"]["mL3"] == "output_power(3)"
+            continue
+        assert entry["parameters_model_units"] == effect.parameters()
+        assert set(entry["units"]) == set(entry["parameters"]) == set(entry["std_errors"])
+        physical = jc.CascadeParams.from_dict(schema["estimates"], orders)
+        kind = EFFECTS[name]
+        mapped = kind(**{f: jnp.asarray(v, float) for f, v in entry["parameters"].items()})
+        in_record = ExtendedModel(physical, (mapped,), noise)
+        y_model = simulate_padded(model, u)[0]
+        y_record = simulate_padded(in_record, scaling.input_to_physical(u))[0]
+        assert np.all(np.isfinite(y_model)) and np.std(y_model) > 0.1, name
+        # to 1e-4 of the output's scale: the floors of an equation (`FLOOR`: 1e-6 added
+        # to a threshold, a Dahl level) stay in model units (`_units`), 1e-5 of the
+        # output's scale here; a wrong factor is off by y_scale, u_scale or their ratio
+        np.testing.assert_allclose(
+            y_record,
+            scaling.output_to_physical(y_model),
+            rtol=1e-6,
+            atol=1e-4 * 50.0,
+            err_msg=name,
+        )
+
+
+def test_output_levels_and_polynomials_in_the_record_s_units_with_offsets():
+    """A record with offsets and scales far from 0 and 1: the record's output computed
+    by hand from the schema's record-unit fields (the cascade's output `c` in the
+    record's units, relative to y_offset: `y_offset + cascade(u - u_offset)`) equals the
+    model's output mapped back: a clip at levels of the record's output, a polynomial of
+    the output less y_offset, a fold at a level of the record's output, an offset."""
+    from jaxcascade._measured._effects import ExtendedModel, simulate_padded
+    from jaxcascade._measured._schema import model_schema
+
+    scaling = jc.Scaling(40.0, 250.0, -3.0, 0.004, "given")
+    params = jc.example(1).params()
+    u_model = np.asarray(jc.uniform_input(jax.random.PRNGKey(6), 200))
+    u = scaling.input_to_physical(u_model)
+    noise = jc.ARNoise(jnp.asarray([]))
+    examples = _effect_examples()
+    cascade = ExtendedModel(params, (), noise)
+    schema = model_schema(cascade, scaling)
+    physical = jc.CascadeParams.from_dict(schema["estimates"], jc.Orders(**schema["orders"]))
+    # the cascade in the record's units (`y - y_offset = cascade(u - u_offset)`)
+    c = scaling.y_offset + np.asarray(jc.simulate(physical, jnp.asarray(u - scaling.u_offset)))
+    np.testing.assert_allclose(
+        c, scaling.output_to_physical(simulate_padded(cascade, u_model)[0]), rtol=1e-9
+    )
+    y0 = scaling.y_offset
+
+    def offset(p):
+        return c + p["offset"]
+
+    def saturation(p):
+        return np.clip(c, p["lower"], p["upper"])
+
+    def polynomial(p):
+        c0, c2, c3 = p["coefficients"]
+        return c + c0 + c2 * (c - y0) ** 2 + c3 * (c - y0) ** 3
+
+    def fold(p):
+        c0, c1, c2, s = p["coefficients"]
+        return c0 + c1 * np.abs(c - s) + c2 * (c - s) ** 2
+
+    # levels inside the output's range, so that the clip acts
+    low, high = np.quantile(simulate_padded(cascade, u_model)[0], [0.2, 0.8])
+    clip = type(examples["output_saturation"])(jnp.asarray(low), jnp.asarray(high))
+    cases = [
+        (examples["output_offset"], offset),
+        (clip, saturation),
+        (examples["output_polynomial"], polynomial),
+        (examples["output_fold"], fold),
+    ]
+    for effect, by_hand in cases:
+        model = ExtendedModel(params, (effect,), noise)
+        (entry,) = model_schema(model, scaling)["effects"]
+        expected = scaling.output_to_physical(simulate_padded(model, u_model)[0])
+        np.testing.assert_allclose(
+            by_hand(entry["parameters"]), expected, rtol=1e-9, atol=1e-9, err_msg=effect.name
+        )
+        assert entry["parameters"] != entry["parameters_model_units"]
+    clipped = saturation(
+        model_schema(ExtendedModel(params, (clip,), noise), scaling)["effects"][0]["parameters"]
+    )
+    assert np.mean(clipped != c) > 0.2  # the clip acted
+
+
+def test_an_effect_s_standard_errors_map_with_the_size_of_the_factor():
+    """A standard error in the records' units is the model's times |factor| (a level's
+    offset does not move it); a fixed field's (the delay) stays null."""
+    from jaxcascade._measured._effects import ExtendedModel
+    from jaxcascade._measured._schema import model_schema
+
+    scaling = jc.Scaling(40.0, 250.0, -3.0, 0.004, "given")
+    effects = _effect_examples()
+    model = ExtendedModel(
+        jc.example(1).params(),
+        (effects["input_delay"], effects["output_saturation"], effects["output_fold"]),
+        jc.ARNoise(jnp.asarray([])),
+    )
+    errors = {
+        "output_saturation.lower": 0.1,
+        "output_fold.coefficients[0]": 0.2,
+        "output_fold.coefficients[2]": 0.3,
+    }
+    delay, saturation, fold = model_schema(model, scaling, errors)["effects"]
+    assert delay["std_errors"] == {"delay": None} and delay["parameters"] == {"delay": 2.0}
+    assert saturation["std_errors"]["lower"] == pytest.approx(0.1 * 0.004)
+    assert saturation["std_errors"]["upper"] is None
+    assert saturation["parameters"]["lower"] == pytest.approx(-3.0 - 0.4 * 0.004)
+    expected = [0.2 * 0.004, None, 0.3 / 0.004, None]
+    assert fold["std_errors"]["coefficients"] == pytest.approx(expected)
+    kinds = ["output_level", "unitless", "output_power(2)", "output_level"]
+    assert fold["units"]["coefficients"] == kinds

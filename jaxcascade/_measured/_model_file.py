@@ -315,7 +315,9 @@ class SavedModel:
         for key in ("std_errors", "std_errors_model_units"):
             model[key] = finite_or_null(model[key])
         for entry in model["effects"]:
-            entry["std_errors_model_units"] = finite_or_null(entry["std_errors_model_units"])
+            for key in ("std_errors", "std_errors_model_units"):
+                if key in entry:
+                    entry[key] = finite_or_null(entry[key])
         try:
             text = json.dumps(data, indent=1, allow_nan=False)
         except ValueError:

@@ -329,7 +329,7 @@ def _final_model_lines(model: dict) -> list[str]:
         f"{sc['u_scale']:.4g}; output offset {sc['y_offset']:.4g}, scale {sc['y_scale']:.4g}). "
         "Standard errors from the output-error information on the estimation records "
         "(infinite: the records do not determine the parameter); an effect's fields in "
-        "model units.",
+        "the records' units by the unit each declares (its `units` in report.json).",
         "",
         *(f"- {equation}" for equation in equations(model)),
         "",
@@ -346,13 +346,25 @@ def _final_model_lines(model: dict) -> list[str]:
     for effect in model["effects"]:
         if effect["name"] == "general_backlash":
             continue  # its terms are the cascade's mL2.., mR2.. above
+        # a report of before the records' units (its effects in model units alone)
+        outer = effect.get("parameters", {})
+        outer_errors = effect.get("std_errors", {})
         for field, value in effect["parameters_model_units"].items():
             values = np.ravel(np.asarray(value, float))
             errors = np.ravel(np.asarray(effect["std_errors_model_units"][field], dtype=object))
-            for i, (v, e) in enumerate(zip(values, errors, strict=True)):
-                name = f"{effect['name']}.{field}" + ("" if values.size == 1 else f"[{i}]")
+            size = values.size
+            if field in outer:
+                records = np.ravel(np.asarray(outer[field], float))
+                record_errors = np.ravel(np.asarray(outer_errors[field], dtype=object))
+            else:  # a field kept in model units
+                records, record_errors = [None] * size, [None] * size
+            rows = zip(values, errors, records, record_errors, strict=True)
+            for i, (v, e, rv, re_) in enumerate(rows):
+                name = f"{effect['name']}.{field}" + ("" if size == 1 else f"[{i}]")
                 shown = f"{v:.6g}" + ("" if e is None else f" ± {_error(e)}")
-                lines.append(f"| {name} | - | - | {shown} |")
+                estimate = "-" if rv is None else f"{rv:.6g}"
+                error = "-" if rv is None or re_ is None else _error(re_)
+                lines.append(f"| {name} | {estimate} | {error} | {shown} |")
     return lines
 
 

@@ -10,6 +10,8 @@ loop's results, `jaxcascade fit --json`, `jaxcascade loop --json`, `report.json`
       "std_errors": {same names},
       "estimates_model_units": {same names}, "std_errors_model_units": {same names},
       "effects": [{"name": "general_backlash",
+                   "units": {"mL2": "output_power(2)", ...},
+                   "parameters": {"mL2": ..., ...}, "std_errors": {"mL2": ..., ...},
                    "parameters_model_units": {"mL2": ..., ...},
                    "std_errors_model_units": {"mL2": ..., ...}}],
       "noise": {"name": "colored_noise", "ar": [...]},
@@ -24,14 +26,41 @@ loop's results, `jaxcascade fit --json`, `jaxcascade loop --json`, `report.json`
   `curveL`, `curveR` never leave the package). Empty where an effect replaced the
   cascade (`cascade` false).
 - `*_model_units`: the same in the units the model was fitted in.
-- `effects`: every added effect, in order, its fields in model units (an effect's
-  parameters have no general map to the records' units), the standard error of each
-  fitted field beside it (`null`: a field held fixed, or a parameter the records do not
-  determine, whose standard error is infinite; JSON has no infinity).
+- `effects`: every added effect, in order: `units`, the kind of unit of each field
+  (the effect's declaration, `Effect.units`; `_effects._units` defines the kinds), and
+  `parameters`, `std_errors`, its fields in the records' units by that kind
+  (`_units.record_units`: `record = factor * model + offset`, a standard error times
+  `|factor|`), beside `parameters_model_units`, `std_errors_model_units`, the same in
+  model units. The standard error of each fitted field is beside it (`null`: a field
+  held fixed, or a parameter the records do not determine, whose standard error is
+  infinite; JSON has no infinity). The records' units follow the cascade's: the
+  output chain's signals are the record's output, a polynomial, a filter or a parallel
+  path acts on the output less `y_offset`, a level (a clip, a fold) is a level of the
+  record's output; the linear block's `x` (which feedback terms see) is in the output's
+  units. By effect:
+  - `output_offset.offset`, `output_drift.slope` (per 1000 samples), `output_dynamics.
+    offset`, `velocity_friction.forces`: `output` (times `y_scale`).
+  - `output_saturation.lower`, `upper`: `output_level` (`y_offset + y_scale` times).
+  - `output_polynomial`, `inner_polynomial`: `c0, c2, c3` of `(y - y_offset)^k` times
+    `y_scale ** (1 - k)`; `output_fold`: `c0` and `s` levels of the record's output,
+    `c1` unitless, `c2` over `y_scale`; `nonlinear_feedback`: `k2, k3` of `x^k`
+    times `y_scale ** (1 - k)`; `general_backlash`: as the cascade's `mL_i`, `mR_i`.
+  - `input_delay.delay` (samples), `output_feedthrough.gain`, `direct_term.gain`,
+    `output_dynamics.zeros`, `poles`, `prandtl_ishlinskii.knots`, `slack_friction.dead`:
+    unitless.
+  - `input_backlash.gap`, `slack_friction.threshold`, `backlash_friction.gap`,
+    `prandtl_ishlinskii.thresholds`: `input` (times `u_scale`).
+  - `backlash_friction.stiffness` (and `backlash_friction_contacts`'), `dahl_friction.sigma`: `output_per_input`
+    (`y_scale / u_scale`); the friction levels (`upper`, `lower`, `level`), a path's
+    `offset` and `prandtl_ishlinskii.weights` (of a unitless basis): `output`.
+  No field of the library's effects is left in model units (the kind `model`, for a
+  field with no map, would leave it out of `parameters`); the small constants of the
+  equations (`FLOOR`, `EPS`) are in model units.
 - `noise`: the AR noise model's coefficients (`[]`: white noise).
 
 `model_schema` writes it from an `ExtendedModel`, `model_from_schema` reads the model
-back (the model file, `_model_file`).
+back from the model units (the model file, `_model_file`; a file without the
+records'-unit keys of effects, written before them, loads the same).
 """
 
 from __future__ import annotations
@@ -45,6 +74,7 @@ from .._data import Scaling
 from .._system._model import CascadeParams, Orders
 from ._effects import EFFECTS, ExtendedModel
 from ._effects._curved import CurvedBacklash
+from ._effects._units import record_units
 from ._noise import ARNoise
 
 
@@ -139,12 +169,20 @@ def model_schema(
         if isinstance(effect, CurvedBacklash):
             terms = _curve_values(effect)
             entry_errors = {name: value_errors.get(name) for name in terms}
+            # the cascade's terms: in `estimates`, by `params_to_physical`
+            units = {name: f"output_power({name[2:]})" for name in terms}
+            parameters = {name: physical[name] for name in terms}
+            record_errors = {name: physical_errors.get(name) for name in terms}
         else:
             terms = effect.parameters()
             entry_errors = _effect_errors(effect, errors)
+            parameters, record_errors, units = record_units(effect, scaling, entry_errors)
         effects.append(
             {
                 "name": effect.name,
+                "units": units,
+                "parameters": parameters,
+                "std_errors": record_errors,
                 "parameters_model_units": terms,
                 "std_errors_model_units": entry_errors,
             }

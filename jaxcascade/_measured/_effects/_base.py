@@ -63,6 +63,11 @@ class Effect(eqx.Module):
     # Wiener-Hammerstein sandwich, `_wiener`); `output_order`.
     inner: ClassVar[bool] = False
     second_block: ClassVar[bool] = False
+    # The unit of each field in the records' units, `{field: kind}` (`_units`: e.g.
+    # "output", "output_level", "input", "unitless", "output_power(k)", or a tuple of one
+    # kind per entry): the schema writes the fields in the records' units with it
+    # (`_units.record_units`). Every field must be declared (tests/test_workflow.py).
+    units: ClassVar[dict[str, str | tuple[str, ...]]] = {}
 
     def input(self, u):
         return u
@@ -378,6 +383,8 @@ class OutputOffset(Effect):
     signature: ClassVar[tuple[str, ...]] = ("mean",)
     description: ClassVar[str] = "constant offset added to the output: y + d"
 
+    units: ClassVar[dict] = {"offset": "output"}
+
     offset: Float[Array, ""]
 
     def output(self, y, x):
@@ -395,6 +402,9 @@ class OutputDrift(Effect):
     description: ClassVar[str] = (
         "linear drift of the output over the record: y + d t / 1000 (t in samples)"
     )
+
+    # per 1000 samples, in the output's units
+    units: ClassVar[dict] = {"slope": "output"}
 
     slope: Float[Array, ""]
 
@@ -421,6 +431,9 @@ class OutputSaturation(Effect):
     signature: ClassVar[tuple[str, ...]] = ("level", "regime", "u2_e", "u2_e2", "mean")
     description: ClassVar[str] = "output clipped to [lower, upper] (a sensor or actuator limit)"
 
+    # levels of the record's output
+    units: ClassVar[dict] = {"lower": "output_level", "upper": "output_level"}
+
     lower: Float[Array, ""]
     upper: Float[Array, ""]
 
@@ -446,6 +459,9 @@ class OutputFeedthrough(Effect):
     signature: ClassVar[tuple[str, ...]] = ("cross_correlation", "level", "regime", "u2_e")
     description: ClassVar[str] = "parallel linear path from x to the output: y + d x"
 
+    # x is in the output's units (the backlash gaps are)
+    units: ClassVar[dict] = {"gain": "unitless"}
+
     gain: Float[Array, ""]
 
     def output(self, y, x):
@@ -463,6 +479,8 @@ class InputDelay(Effect):
     description: ClassVar[str] = "pure input delay of d samples: u(t - d)"
     fixed: ClassVar[tuple[str, ...]] = ("delay",)
     max_delay: ClassVar[int] = 5
+
+    units: ClassVar[dict] = {"delay": "unitless"}  # samples
 
     delay: Float[Array, ""]  # an integer, held fixed; one start per value
 

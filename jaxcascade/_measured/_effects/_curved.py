@@ -51,6 +51,10 @@ class CurvedBacklash(Effect):
     degrees: ClassVar[tuple[int, ...]] = (2, 3)
     needs_signature: ClassVar[bool] = True
 
+    # mL_i, mR_i (i = 2..q) of the powers of x in the output's units
+    # (`_data.Scaling.params_to_physical`; the schema writes them under those names)
+    units: ClassVar[dict] = {"curveL": "output_powers(2)", "curveR": "output_powers(2)"}
+
     curveL: Float[Array, " qm1"]
     curveR: Float[Array, " qm1"]
 

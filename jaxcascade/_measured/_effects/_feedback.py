@@ -132,6 +132,9 @@ class NonlinearFeedback(Effect):
     )
     needs_signature: ClassVar[bool] = True
 
+    # x(t-1)^2, x(t-1)^3 in a term of x: x is in the output's units
+    units: ClassVar[dict] = {"coefficients": "output_powers(2)"}
+
     coefficients: Float[Array, " 2"]  # k2, k3
 
     def recursion(self, v, x_prev, x_new):
@@ -162,6 +165,9 @@ class DirectTerm(Effect):
         "continuous dynamics)"
     )
     needs_signature: ClassVar[bool] = True
+
+    # from v to x, both in the output's units
+    units: ClassVar[dict] = {"gain": "unitless"}
 
     gain: Float[Array, " 1"]
 
@@ -198,6 +204,9 @@ class VelocityFriction(Effect):
     needs_signature: ClassVar[bool] = True
     # tried only where the loop models an output that integrates its input
     integrating_only: ClassVar[bool] = True
+
+    # a velocity x in the output's units (of the modelled, differenced, output)
+    units: ClassVar[dict] = {"forces": "output"}
 
     forces: Float[Array, " 2"]  # f+ (against motion up), f- (against motion down)
 

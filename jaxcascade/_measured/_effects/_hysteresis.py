@@ -197,6 +197,13 @@ class SlackFriction(_LinearPath):
     # to [0, 0.98].
     FLOOR: ClassVar[float] = 1e-6
 
+    units: ClassVar[dict] = {
+        "threshold": "input",
+        "dead": "unitless",  # a fraction of the threshold
+        "upper": "output",
+        "lower": "output",
+    }
+
     threshold: Float[Array, ""]
     dead: Float[Array, ""]
     upper: Float[Array, ""]
@@ -276,6 +283,14 @@ class BacklashFriction(_LinearPath):
     # The stiffness enters as |stiffness| + FLOOR (kept off zero, where the slack's
     # travel gap / stiffness is undefined).
     FLOOR: ClassVar[float] = 1e-9
+
+    units: ClassVar[dict] = {
+        "gap": "input",
+        "stiffness": "output_per_input",
+        "upper": "output",
+        "lower": "output",
+        "offset": "output",
+    }
 
     gap: Float[Array, ""]
     stiffness: Float[Array, ""]
@@ -422,6 +437,15 @@ class PrandtlIshlinskii(_LinearPath):
     sizes: ClassVar[tuple[int, ...]] = (4, 8, 16, 24)
     knot_values: ClassVar[tuple[float, ...]] = (0.5, 0.9)
 
+    # the basis is the stop operators over their thresholds and hinges of those
+    # (`pi_basis`): unitless, so a weight is in the output's units
+    units: ClassVar[dict] = {
+        "thresholds": "input",
+        "knots": "unitless",
+        "weights": "output",
+        "offset": "output",
+    }
+
     thresholds: Float[Array, " K"]
     knots: Float[Array, " J"]
     weights: Float[Array, " P"]
@@ -505,6 +529,9 @@ class DahlFriction(_LinearPath):
     # rate sigma / level is undefined.
     FLOOR: ClassVar[float] = 1e-6
 
+    # dF = sigma du (..): a force per input
+    units: ClassVar[dict] = {"sigma": "output_per_input", "level": "output"}
+
     sigma: Float[Array, ""]
     level: Float[Array, ""]
 
@@ -555,6 +582,9 @@ class InputBacklash(Effect):
     fractions: ClassVar[tuple[float, ...]] = (0.02, 0.05, 0.1, 0.2)
     refine_steps: ClassVar[int] = 30
     needs_signature: ClassVar[bool] = True
+
+    # a half-width on the input (the play operator commutes with the input's offset)
+    units: ClassVar[dict] = {"gap": "input"}
 
     gap: Float[Array, ""]
 

@@ -87,6 +87,11 @@ class OutputPolynomial(Effect):
     )
     needs_signature: ClassVar[bool] = True
 
+    # c0, c2, c3 of the powers 0, 2, 3 of the output less y_offset
+    units: ClassVar[dict] = {
+        "coefficients": ("output_power(0)", "output_power(2)", "output_power(3)")
+    }
+
     coefficients: Float[Array, " 3"]  # c0, c2, c3
 
     def output(self, y, x):
@@ -117,6 +122,12 @@ class OutputFold(Effect):
     # the fold's smoothing, in model units (the records' standard deviation is about one)
     EPS: ClassVar[float] = 1e-3
     quantiles: ClassVar[tuple[float, ...]] = (0.0, 0.05, 0.2)
+
+    # c0 + c1 |y - s| + c2 (y - s)^2: the output at the fold and the fold are levels of
+    # the record's output; c1 unitless, c2 per output
+    units: ClassVar[dict] = {
+        "coefficients": ("output_level", "unitless", "output_power(2)", "output_level")
+    }
 
     coefficients: Float[Array, " 4"]  # c0, c1, c2, s
 
@@ -157,6 +168,9 @@ class OutputDynamics(Effect):
     # one structure, two poles and two zeros (a first-order filter is its special case):
     # a candidate costs a refit program per structure
     orders: ClassVar[tuple[int, ...]] = (2,)
+
+    # the filter acts on the output less y_offset; its offset is added to it
+    units: ClassVar[dict] = {"zeros": "unitless", "poles": "unitless", "offset": "output"}
 
     zeros: Float[Array, " m"]  # beta_1 .. beta_m
     poles: Float[Array, " n"]  # alpha_1 .. alpha_n
