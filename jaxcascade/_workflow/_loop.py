@@ -363,17 +363,33 @@ def loop_records(
     from .._measured._report import record_name
     from .._measured._scoring import score_record, stored_window
 
-    orders = orders if isinstance(orders, Orders) else Orders.parse(str(orders))
-    if orders.degree > 1:
-        raise ValueError(
-            f"orders {orders} have a branch degree; the loop declares the straight backlash "
-            "(four orders) and adds curved branches itself where the residual asks for them "
-            "(its effect general_backlash)."
-        )
+    # The settings, each refused in one sentence before any work.
     check_settings(max_effects, dm_threshold, min_gain, retries, threads, init_samples)
+    if outliers not in ("auto", "keep"):
+        raise ValueError(f"outliers (--outliers) must be auto or keep, got {outliers!r}.")
+    if effects is not None:
+        effects = _effect_names(effects)
+    # The records, with their scoring windows (in samples of the decimated records), in
+    # the estimation records' scaling and of one sample period.
     estimation, validation, test = _as_list(estimation), _as_list(validation), _as_list(test)
     if not estimation or not validation:
         raise ValueError("loop_records needs estimation and validation records.")
+    if window is not None and len(validation) > 1:
+        raise ValueError(
+            f"the window (--window) scores one validation record; {len(validation)} were "
+            "given: drop the window or give one validation record."
+        )
+    if test_windows and len(test_windows) != len(test):
+        raise ValueError(
+            f"test_windows (--test-window) takes one (start, stop) per test record "
+            f"({len(test)}), got {len(test_windows)}."
+        )
+    window_stored = None if window is None else (int(window[0]), int(window[1]))
+    window = stored_window(window, validation[0], "window (--window)")
+    test_windows = [
+        stored_window(w, r, "test window (--test-window)")
+        for w, r in zip(test_windows or [None] * len(test), test, strict=True)
+    ]
     scaling = estimation[0].scaling
     if any(r.scaling != scaling for r in estimation):
         raise ValueError(
@@ -383,29 +399,14 @@ def loop_records(
     validation = [in_scaling(r, scaling) for r in validation]
     test = [in_scaling(r, scaling) for r in test]
     check_sample_periods([*estimation, *validation, *test])
-    if outliers not in ("auto", "keep"):
-        raise ValueError(f"outliers (--outliers) must be auto or keep, got {outliers!r}.")
-    if effects is not None:
-        effects = _effect_names(effects)
-    if window is not None and len(validation) > 1:
+    # The declared cascade and the state-initialisation window.
+    orders = orders if isinstance(orders, Orders) else Orders.parse(str(orders))
+    if orders.degree > 1:
         raise ValueError(
-            f"the window (--window) scores one validation record; {len(validation)} were "
-            "given: drop the window or give one validation record."
+            f"orders {orders} have a branch degree; the loop declares the straight backlash "
+            "(four orders) and adds curved branches itself where the residual asks for them "
+            "(its effect general_backlash)."
         )
-    window_stored = None if window is None else (int(window[0]), int(window[1]))
-    window = stored_window(window, validation[0], "window (--window)")
-    if test_windows:
-        if len(test_windows) != len(test):
-            raise ValueError(
-                f"test_windows (--test-window) takes one (start, stop) per test record "
-                f"({len(test)}), got {len(test_windows)}."
-            )
-        test_windows = [
-            stored_window(w, r, "test window (--test-window)")
-            for w, r in zip(test_windows, test, strict=True)
-        ]
-    else:
-        test_windows = [None] * len(test)
     say = progress or (lambda message: None)
     init_rule = None
     if init_samples is None:
