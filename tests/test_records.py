@@ -279,7 +279,8 @@ def test_mismatched_sample_periods_are_refused(capsys, tmp_path):
 
 @needs_ced
 def test_loop_reads_ced_by_specs_without_input_and_output(capsys):
-    from jaxcascade._cli._loop import _file_records
+    from jaxcascade._cli._loop import _settings
+    from jaxcascade._workflow._loop import _command_records
 
     def spec(signals, span):
         return f"{CED}:{signals}:{span}"
@@ -288,7 +289,8 @@ def test_loop_reads_ced_by_specs_without_input_and_output(capsys):
     argv += ["--validate", spec("u12,z12", "300:400")]
     argv += ["--test", spec("u11,z11", "400:500"), spec("u12,z12", "400:500"), "--ts", "0.02"]
     argv += ["--validate", spec("u11,z11", "400:500")]  # a second validation record
-    training, validations, tests = _file_records(build_parser().parse_args(argv))
+    settings = _settings(build_parser().parse_args(argv), None)
+    training, validations, tests, _ = _command_records(settings)
     assert [len(r) for r in training] == [400, 300] and [len(v) for v in validations] == [
         100,
         100,

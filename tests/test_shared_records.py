@@ -11,8 +11,9 @@ import scipy.io
 
 from jaxcascade._cli import build_parser
 from jaxcascade._cli._common import record_options
-from jaxcascade._cli._loop import _file_records
+from jaxcascade._cli._loop import _settings
 from jaxcascade._data import read_record
+from jaxcascade._workflow._loop import _command_records
 
 SHARED = pathlib.Path(__file__).resolve().parents[2] / "shared" / "data"
 BENCH = SHARED / "nonlinear_benchmarks"
@@ -82,7 +83,8 @@ def test_the_loop_reads_records_of_several_files_and_formats_together():
     argv = ["loop", f"{harmonic}:{signals}", f"{quake}:{signals}:0:4000"]
     argv += ["--validate", f"{quake}:{signals}:4000:6000", "--time", "time_s"]
     argv += ["--test", f"{quake}:{signals}:6000:8000"]
-    training, validations, tests = _file_records(build_parser().parse_args(argv))
+    settings = _settings(build_parser().parse_args(argv), None)
+    training, validations, tests, _ = _command_records(settings)
     records = [*training, *validations, *tests]
     assert len({r.scaling for r in records}) == 1
     assert all(r.sample_period == pytest.approx(1 / 1024, rel=1e-3) for r in records)

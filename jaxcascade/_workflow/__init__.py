@@ -2,8 +2,9 @@
 returning a result object.
 
 - `fit_record` (`_fit`, `jaxcascade fit`): a `FitResult`;
-- `loop_records`, `loop_benchmark` (`_loop`, `jaxcascade loop`): a `LoopRun`, whose
-  `report(folder)` writes what `--report` writes (`_report`: the files and figures);
+- `loop_records`, `loop_benchmark` (`_loop`, `jaxcascade loop`: `loop_command` of one
+  `LoopSettings`): a `LoopRun`, whose `report(folder)` writes what `--report` writes
+  (`_report`: the files and figures);
 - `simulate_model` (`_simulate`, `jaxcascade simulate`): a `Simulation`;
 - `reproduce_example` (`_reproduce`, `jaxcascade reproduce`): one simulated record of a
   paper example (or of the general backlash's) fitted, its table and figure written: a

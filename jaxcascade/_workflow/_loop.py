@@ -9,7 +9,9 @@ record (`_scoring.score_record`: initialised on the samples before the scored on
 from rest), the input coverage of each record measured (`_coverage`), and a sentence
 said where the final model is worse than the mean or the peer (`_scoring.verdict`).
 `loop_benchmark` takes the records of a benchmark by its protocol
-(`_benchmark_protocol`) and adds its test figures in its unit. The result, `LoopRun`,
+(`_benchmark_protocol`) and adds its test figures in its unit. `loop_command` runs the
+command's `LoopSettings`: every setting checked before a file is read, then the records
+read (the record specs, or the benchmark), then `loop_records`. The result, `LoopRun`,
 is what the command prints (`to_dict(brief=True)` is `--json`) and writes
 (`report(folder)`, `_report`).
 """
@@ -361,17 +363,33 @@ def loop_records(
     from .._measured._report import record_name
     from .._measured._scoring import score_record, stored_window
 
-    orders = orders if isinstance(orders, Orders) else Orders.parse(str(orders))
-    if orders.degree > 1:
-        raise ValueError(
-            f"orders {orders} have a branch degree; the loop declares the straight backlash "
-            "(four orders) and adds curved branches itself where the residual asks for them "
-            "(its effect general_backlash)."
-        )
+    # The settings, each refused in one sentence before any work.
     check_settings(max_effects, dm_threshold, min_gain, retries, threads, init_samples)
+    if outliers not in ("auto", "keep"):
+        raise ValueError(f"outliers (--outliers) must be auto or keep, got {outliers!r}.")
+    if effects is not None:
+        effects = _effect_names(effects)
+    # The records, with their scoring windows (in samples of the decimated records), in
+    # the estimation records' scaling and of one sample period.
     estimation, validation, test = _as_list(estimation), _as_list(validation), _as_list(test)
     if not estimation or not validation:
         raise ValueError("loop_records needs estimation and validation records.")
+    if window is not None and len(validation) > 1:
+        raise ValueError(
+            f"the window (--window) scores one validation record; {len(validation)} were "
+            "given: drop the window or give one validation record."
+        )
+    if test_windows and len(test_windows) != len(test):
+        raise ValueError(
+            f"test_windows (--test-window) takes one (start, stop) per test record "
+            f"({len(test)}), got {len(test_windows)}."
+        )
+    window_stored = None if window is None else (int(window[0]), int(window[1]))
+    window = stored_window(window, validation[0], "window (--window)")
+    test_windows = [
+        stored_window(w, r, "test window (--test-window)")
+        for w, r in zip(test_windows or [None] * len(test), test, strict=True)
+    ]
     scaling = estimation[0].scaling
     if any(r.scaling != scaling for r in estimation):
         raise ValueError(
@@ -381,29 +399,14 @@ def loop_records(
     validation = [in_scaling(r, scaling) for r in validation]
     test = [in_scaling(r, scaling) for r in test]
     check_sample_periods([*estimation, *validation, *test])
-    if outliers not in ("auto", "keep"):
-        raise ValueError(f"outliers (--outliers) must be auto or keep, got {outliers!r}.")
-    if effects is not None:
-        effects = _effect_names(effects)
-    if window is not None and len(validation) > 1:
+    # The declared cascade and the state-initialisation window.
+    orders = orders if isinstance(orders, Orders) else Orders.parse(str(orders))
+    if orders.degree > 1:
         raise ValueError(
-            f"the window (--window) scores one validation record; {len(validation)} were "
-            "given: drop the window or give one validation record."
+            f"orders {orders} have a branch degree; the loop declares the straight backlash "
+            "(four orders) and adds curved branches itself where the residual asks for them "
+            "(its effect general_backlash)."
         )
-    window_stored = None if window is None else (int(window[0]), int(window[1]))
-    window = stored_window(window, validation[0], "window (--window)")
-    if test_windows:
-        if len(test_windows) != len(test):
-            raise ValueError(
-                f"test_windows (--test-window) takes one (start, stop) per test record "
-                f"({len(test)}), got {len(test_windows)}."
-            )
-        test_windows = [
-            stored_window(w, r, "test window (--test-window)")
-            for w, r in zip(test_windows, test, strict=True)
-        ]
-    else:
-        test_windows = [None] * len(test)
     say = progress or (lambda message: None)
     init_rule = None
     if init_samples is None:
@@ -555,6 +558,119 @@ def loop_records(
     )
 
 
+@dataclasses.dataclass(frozen=True)
+class LoopSettings:
+    """What `jaxcascade loop` asks for, as one value: the command line builds it
+    (`_cli._loop`), `loop_command` checks and runs it.
+
+    The records: the record specs `train`, `validate`, `test`, read with `read`
+    (`read_record`'s settings) in the estimation records' joint `scaling`; or the
+    benchmark `benchmark` under the folder `data` (`loop_benchmark`: at most
+    `max_samples` estimation samples, decimated by `decimate`, None its rule).
+    `decimate`: the factor given, None where it was not. `window`, `test_windows` and the
+    rest: `loop_records`'.
+    """
+
+    orders: Orders
+    train: tuple[str, ...] = ()
+    validate: tuple[str, ...] = ()
+    test: tuple[str, ...] = ()
+    read: dict | None = None
+    scaling: str = _defaults.SCALING
+    benchmark: str | None = None
+    data: str | None = None
+    max_samples: int = _defaults.MAX_SAMPLES
+    decimate: int | None = None
+    window: tuple[int, int] | None = None
+    test_windows: tuple[tuple[int, int], ...] | None = None
+    max_effects: int = _defaults.MAX_EFFECTS
+    effects: tuple[str, ...] | None = None
+    init_samples: int | None = None
+    dm_threshold: float = _defaults.DM_THRESHOLD
+    min_gain: float = _defaults.MIN_GAIN
+    seed: int = _defaults.SEED
+    retries: int = _defaults.RETRIES
+    threads: int | None = None
+    integrate: str = _defaults.INTEGRATE
+    outliers: str = _defaults.OUTLIERS
+    checkpoints: Any = None
+    progress: Callable[[str], None] | None = None
+    command: str | None = None
+
+
+def loop_command(settings: LoopSettings) -> LoopRun:
+    """`jaxcascade loop` as `settings` says, in three stages: the settings checked (a
+    `ValueError` in one sentence before any file is read), the records read (the record
+    specs, or the benchmark by its protocol), and `loop_records` on them."""
+    s = settings
+    check_settings(
+        s.max_effects, s.dm_threshold, s.min_gain, s.retries, s.threads, s.init_samples, s.decimate
+    )
+    effects = None if s.effects is None else _effect_names(s.effects)
+    estimation, validation, test, benchmark = _command_records(s)
+    return loop_records(
+        estimation,
+        validation,
+        test,
+        orders=s.orders,
+        max_effects=s.max_effects,
+        effects=effects,
+        window=s.window,
+        test_windows=s.test_windows,
+        init_samples=s.init_samples,
+        dm_threshold=s.dm_threshold,
+        min_gain=s.min_gain,
+        seed=s.seed,
+        retries=s.retries,
+        threads=s.threads,
+        integrate=s.integrate,
+        outliers=s.outliers,
+        checkpoints=s.checkpoints,
+        progress=s.progress,
+        command=s.command,
+        _benchmark=benchmark,
+    )
+
+
+def _command_records(s: LoopSettings) -> tuple[list, list, list, Any]:
+    """The estimation, validation and test records `s` names, and the benchmark's
+    records and protocol (or None): the benchmark read by its protocol, else the record
+    specs, once the command line names them and their signals."""
+    if s.benchmark:
+        records = _benchmark_records(s.benchmark, s.data, s.max_samples, s.decimate, s.scaling)
+        return records.estimation, records.validation, records.test, records
+    from .._data import parse_record_spec, read_jointly
+
+    specs = [*s.train, *s.validate, *s.test]
+    named = bool(specs) and all(parse_record_spec(spec).input is not None for spec in specs)
+    needed = (
+        ("TRAIN", s.train),
+        ("--validate", s.validate),
+        ("--input", s.read["input_column"] or named),
+        ("--output", s.read["output_column"] or named),
+    )
+    missing = [option for option, value in needed if not value]
+    if missing:
+        raise ValueError(
+            f"loop needs {', '.join(missing)} (or --benchmark NAME --data ROOT); see "
+            "jaxcascade loop --help."
+        )
+    # Lengths are checked by the loop: the estimation records together, a scored record
+    # against its initialisation window.
+    return (*read_jointly(s.train, s.validate, s.test, **s.read, scaling=s.scaling), None)
+
+
+def _benchmark_records(name, root, max_samples, decimate, scaling):
+    """A benchmark's records by its protocol (`_benchmark_protocol.benchmark_records`),
+    `max_samples` checked before its files are read."""
+    from .._measured._benchmark_data import benchmark_data
+    from .._measured._benchmark_protocol import benchmark_records, check_max_samples
+
+    check_max_samples(max_samples)  # before the files are read
+    data = benchmark_data(name, root)
+    return benchmark_records(data, max_samples=max_samples, decimate=decimate, scaling=scaling)
+
+
 def loop_benchmark(
     name: str,
     root: str | os.PathLike,
@@ -574,13 +690,7 @@ def loop_benchmark(
     `init_samples` is given). `options`: those of `loop_records`. The `LoopRun`'s
     `to_dict()["benchmark"]` holds the test RMSE in the benchmark's unit beside the
     published baselines."""
-    from .._measured._benchmark_data import benchmark_data
-    from .._measured._benchmark_protocol import benchmark_records, check_max_samples
-
-    check_max_samples(max_samples)  # before the files are read
-    records = benchmark_records(
-        benchmark_data(name, root), max_samples=max_samples, decimate=decimate, scaling=scaling
-    )
+    records = _benchmark_records(name, root, max_samples, decimate, scaling)
     return loop_records(
         records.estimation,
         records.validation,
@@ -601,7 +711,7 @@ def check_settings(
     decimate=1,
 ) -> None:
     """The loop's settings, a `ValueError` in one sentence naming the argument and the
-    command's option (`loop_records` checks them; `jaxcascade loop` before it reads a
+    command's option (`loop_records` checks them; `loop_command` before it reads a
     record)."""
     checks = (
         (max_effects >= 0, "max_effects (--max-effects) must be >= 0", max_effects),
