@@ -275,7 +275,7 @@ def mappings() -> int | None:
     system has no such file."""
     try:
         with open("/proc/self/maps", "rb") as maps:
-            return sum(1 for _ in maps)
+            return maps.read().count(b"\n")  # one line a mapping
     except OSError:
         return None
 
