@@ -2,9 +2,9 @@
 
 The command parses its options (`_loop_options`) into one `LoopSettings` (`_settings`),
 calls `_workflow._loop.loop_command` with it (the settings checked, the record specs or
-the benchmark read, `loop_records` run on them) and prints what it returns: the summary
-lines or `--json` (`LoopRun.to_dict(brief=True)`), then the verdict and coverage
-sentences. `--report DIR` writes the report (`LoopRun.report`:
+the benchmark read, the loop run on them as `loop_records` runs it) and prints what it
+returns: the summary lines or `--json` (`LoopRun.to_dict(brief=True)`), then the
+verdict and coverage sentences. `--report DIR` writes the report (`LoopRun.report`:
 `report.json`, `report.md`, `scores.csv`, `candidates.csv`, `model.json` and the
 figures; `--no-figures` leaves the PNG files out). While the loop runs, every finished
 fit and round is kept in `DIR/checkpoints/` (`_loop_resume`: `--resume`, `--overwrite`,

@@ -11,9 +11,11 @@ said where the final model is worse than the mean or the peer (`_scoring.verdict
 `loop_benchmark` takes the records of a benchmark by its protocol
 (`_benchmark_protocol`) and adds its test figures in its unit. `loop_command` runs the
 command's `LoopSettings`: every setting checked before a file is read, then the records
-read (the record specs, or the benchmark), then `loop_records`. The result, `LoopRun`,
-is what the command prints (`to_dict(brief=True)` is `--json`) and writes
-(`report(folder)`, `_report`).
+read (the record specs, or the benchmark: in one scaling and of one sample period as
+read) with their state-initialisation window, then the loop on them (`_loop`, which
+`loop_records` calls once it has checked and prepared the records it is given). The
+result, `LoopRun`, is what the command prints (`to_dict(brief=True)` is `--json`) and
+writes (`report(folder)`, `_report`).
 """
 
 from __future__ import annotations
@@ -347,49 +349,16 @@ def loop_records(
 
     Returns a `LoopRun`; a `ValueError` with one sentence for a bad setting or record.
     """
-    import jax
-
-    from .._estimator._robust import Robust
-    from .._measured import _coverage
-    from .._measured._arx import arx_peer
-    from .._measured._integrating import differenced, integrated, integration
-    from .._measured._loop import (
-        default_threads,
-        initialised_output,
-        model_error_loop,
-        simulated_output,
-    )
-    from .._measured._outliers import find_outliers, impute, on_records
-    from .._measured._report import record_name
-    from .._measured._scoring import score_record, stored_window
-
     # The settings, each refused in one sentence before any work.
-    check_settings(max_effects, dm_threshold, min_gain, retries, threads, init_samples)
-    if outliers not in ("auto", "keep"):
-        raise ValueError(f"outliers (--outliers) must be auto or keep, got {outliers!r}.")
+    check_settings(
+        max_effects, dm_threshold, min_gain, retries, threads, init_samples, outliers=outliers
+    )
     if effects is not None:
         effects = _effect_names(effects)
-    # The records, with their scoring windows (in samples of the decimated records), in
-    # the estimation records' scaling and of one sample period.
+    # The records, in the estimation records' scaling and of one sample period.
     estimation, validation, test = _as_list(estimation), _as_list(validation), _as_list(test)
     if not estimation or not validation:
         raise ValueError("loop_records needs estimation and validation records.")
-    if window is not None and len(validation) > 1:
-        raise ValueError(
-            f"the window (--window) scores one validation record; {len(validation)} were "
-            "given: drop the window or give one validation record."
-        )
-    if test_windows and len(test_windows) != len(test):
-        raise ValueError(
-            f"test_windows (--test-window) takes one (start, stop) per test record "
-            f"({len(test)}), got {len(test_windows)}."
-        )
-    window_stored = None if window is None else (int(window[0]), int(window[1]))
-    window = stored_window(window, validation[0], "window (--window)")
-    test_windows = [
-        stored_window(w, r, "test window (--test-window)")
-        for w, r in zip(test_windows or [None] * len(test), test, strict=True)
-    ]
     scaling = estimation[0].scaling
     if any(r.scaling != scaling for r in estimation):
         raise ValueError(
@@ -407,21 +376,113 @@ def loop_records(
             "(four orders) and adds curved branches itself where the residual asks for them "
             "(its effect general_backlash)."
         )
-    say = progress or (lambda message: None)
-    init_rule = None
+    init_default = init_samples is None and _benchmark is None
     if init_samples is None:
         # the benchmark's own window (in samples after decimation), else the measured-data
-        # default: at most a stated fraction of the shortest scored record (`_defaults`)
-        if _benchmark is not None:
-            init_samples = _benchmark.init_samples
-        else:
-            init_samples = _defaults.init_samples(len(r) for r in [*validation, *test])
-            if init_samples < _defaults.INIT_SAMPLES:
-                init_rule = (
-                    f"--init-samples {init_samples}: the default {_defaults.INIT_SAMPLES} is "
-                    f"at most {_defaults.INIT_FRACTION:g} of the shortest scored record"
-                )
-                say(init_rule)
+        # default of the scored records' lengths (`_defaults.init_samples`)
+        init_samples = (
+            _benchmark.init_samples
+            if _benchmark is not None
+            else _defaults.init_samples(len(r) for r in [*validation, *test])
+        )
+    return _loop(
+        estimation,
+        validation,
+        test,
+        orders,
+        init_samples,
+        init_default=init_default,
+        max_effects=max_effects,
+        effects=effects,
+        window=window,
+        test_windows=test_windows,
+        dm_threshold=dm_threshold,
+        min_gain=min_gain,
+        seed=seed,
+        retries=retries,
+        threads=threads,
+        integrate=integrate,
+        outliers=outliers,
+        checkpoints=checkpoints,
+        progress=progress,
+        command=command,
+        benchmark=_benchmark,
+    )
+
+
+def _loop(
+    estimation: list[Record],
+    validation: list[Record],
+    test: list[Record],
+    orders: Orders,
+    init_samples: int,
+    *,
+    init_default: bool,
+    max_effects: int,
+    effects: tuple[str, ...] | None,
+    window: tuple[int, int] | None,
+    test_windows: Sequence[tuple[int, int] | None] | None,
+    dm_threshold: float,
+    min_gain: float,
+    seed: int,
+    retries: int,
+    threads: int | None,
+    integrate: str,
+    outliers: str,
+    checkpoints,
+    progress: Callable[[str], None] | None,
+    command: str | None,
+    benchmark,
+) -> LoopRun:
+    """The loop on records as `loop_records` and `loop_command` have prepared them (each
+    setting checked; the records in the estimation records' scaling and of one sample
+    period; the declared `orders`; the state-initialisation window `init_samples`,
+    `init_default` where it is the measured-data default): the scoring windows in
+    samples of the decimated records, then the loop, the ARX peer, the scores and the
+    coverage (module docstring)."""
+    import jax
+
+    from .._estimator._robust import Robust
+    from .._measured import _coverage
+    from .._measured._arx import arx_peer
+    from .._measured._integrating import differenced, integrated, integration
+    from .._measured._loop import (
+        default_threads,
+        initialised_output,
+        model_error_loop,
+        simulated_output,
+    )
+    from .._measured._outliers import find_outliers, impute, on_records
+    from .._measured._report import record_name
+    from .._measured._scoring import score_record, stored_window
+
+    # The scoring windows, in samples of the decimated records.
+    if window is not None and len(validation) > 1:
+        raise ValueError(
+            f"the window (--window) scores one validation record; {len(validation)} were "
+            "given: drop the window or give one validation record."
+        )
+    if test_windows and len(test_windows) != len(test):
+        raise ValueError(
+            f"test_windows (--test-window) takes one (start, stop) per test record "
+            f"({len(test)}), got {len(test_windows)}."
+        )
+    window_stored = None if window is None else (int(window[0]), int(window[1]))
+    window = stored_window(window, validation[0], "window (--window)")
+    test_windows = [
+        stored_window(w, r, "test window (--test-window)")
+        for w, r in zip(test_windows or [None] * len(test), test, strict=True)
+    ]
+    scaling = estimation[0].scaling
+    say = progress or (lambda message: None)
+    init_rule = None
+    if init_default and init_samples < _defaults.INIT_SAMPLES:
+        # the default is at most a stated fraction of the shortest scored record
+        init_rule = (
+            f"--init-samples {init_samples}: the default {_defaults.INIT_SAMPLES} is "
+            f"at most {_defaults.INIT_FRACTION:g} of the shortest scored record"
+        )
+        say(init_rule)
     # An output that integrates its input (no stable ARX fits it) is modelled through its
     # difference and integrated back for scoring (`_integrating`).
     integrating = integration(estimation, integrate)
@@ -554,7 +615,7 @@ def loop_records(
         settings={"retries": retries, "seed": seed, "outliers": outliers},
         outliers=outlier_rows,
         command=command or "loop_records(...)",
-        benchmark=_benchmark,
+        benchmark=benchmark,
     )
 
 
@@ -601,23 +662,40 @@ class LoopSettings:
 def loop_command(settings: LoopSettings) -> LoopRun:
     """`jaxcascade loop` as `settings` says, in three stages: the settings checked (a
     `ValueError` in one sentence before any file is read), the records read (the record
-    specs, or the benchmark by its protocol), and `loop_records` on them."""
+    specs in one scaling and of one sample period, `read_jointly`, or the benchmark by
+    its protocol, built so) with their state-initialisation window, and the loop on them
+    (`_loop`, as `loop_records` runs it)."""
     s = settings
     check_settings(
-        s.max_effects, s.dm_threshold, s.min_gain, s.retries, s.threads, s.init_samples, s.decimate
+        s.max_effects,
+        s.dm_threshold,
+        s.min_gain,
+        s.retries,
+        s.threads,
+        s.init_samples,
+        s.decimate,
+        s.outliers,
     )
     effects = None if s.effects is None else _effect_names(s.effects)
     estimation, validation, test, benchmark = _command_records(s)
-    return loop_records(
+    init_samples = s.init_samples
+    if init_samples is None:  # as `loop_records`
+        init_samples = (
+            benchmark.init_samples
+            if benchmark is not None
+            else _defaults.init_samples(len(r) for r in [*validation, *test])
+        )
+    return _loop(
         estimation,
         validation,
         test,
-        orders=s.orders,
+        s.orders,
+        init_samples,
+        init_default=s.init_samples is None and benchmark is None,
         max_effects=s.max_effects,
         effects=effects,
         window=s.window,
         test_windows=s.test_windows,
-        init_samples=s.init_samples,
         dm_threshold=s.dm_threshold,
         min_gain=s.min_gain,
         seed=s.seed,
@@ -628,7 +706,7 @@ def loop_command(settings: LoopSettings) -> LoopRun:
         checkpoints=s.checkpoints,
         progress=s.progress,
         command=s.command,
-        _benchmark=benchmark,
+        benchmark=benchmark,
     )
 
 
@@ -709,6 +787,7 @@ def check_settings(
     threads=None,
     init_samples=None,
     decimate=1,
+    outliers="auto",
 ) -> None:
     """The loop's settings, a `ValueError` in one sentence naming the argument and the
     command's option (`loop_records` checks them; `loop_command` before it reads a
@@ -725,6 +804,11 @@ def check_settings(
             init_samples,
         ),
         (decimate is None or decimate >= 1, "decimate (--decimate) must be >= 1", decimate),
+        (
+            outliers in ("auto", "keep"),
+            "outliers (--outliers) must be auto or keep",
+            repr(outliers),
+        ),
     )
     for ok, message, value in checks:
         if not ok:
