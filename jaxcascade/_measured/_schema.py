@@ -50,9 +50,10 @@ loop's results, `jaxcascade fit --json`, `jaxcascade loop --json`, `report.json`
     unitless.
   - `input_backlash.gap`, `slack_friction.threshold`, `backlash_friction.gap`,
     `prandtl_ishlinskii.thresholds`: `input` (times `u_scale`).
-  - `backlash_friction.stiffness` (and `backlash_friction_contacts`'), `dahl_friction.sigma`: `output_per_input`
-    (`y_scale / u_scale`); the friction levels (`upper`, `lower`, `level`), a path's
-    `offset` and `prandtl_ishlinskii.weights` (of a unitless basis): `output`.
+  - `backlash_friction.stiffness` (and `backlash_friction_contacts`'),
+    `dahl_friction.sigma`: `output_per_input` (`y_scale / u_scale`); the friction
+    levels (`upper`, `lower`, `level`), a path's `offset` and
+    `prandtl_ishlinskii.weights` (of a unitless basis): `output`.
   No field of the library's effects is left in model units (the kind `model`, for a
   field with no map, would leave it out of `parameters`); the small constants of the
   equations (`FLOOR`, `EPS`) are in model units.
