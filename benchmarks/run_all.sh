@@ -157,6 +157,9 @@ nonlinear() {  # issue 32 (needs ../shared/data): the loop on the community's no
     # models outside the loop built for EMPS's drift: the README's sentence on EMPS reads them
     python benchmarks/emps_reference.py --data "${NLB_DATA:-../shared/data/nonlinear_benchmarks}" \
         --out results/nonlinear_benchmarks/emps_reference
+    # how EMPS's validation record ranks the loop's candidates against its test record
+    python benchmarks/emps_candidates.py --data "${NLB_DATA:-../shared/data/nonlinear_benchmarks}" \
+        --out results/nonlinear_benchmarks/emps_candidates
     python benchmarks/nonlinear_benchmarks.py --data "${NLB_DATA:-../shared/data/nonlinear_benchmarks}" \
         --out results/nonlinear_benchmarks
 }
