@@ -81,8 +81,33 @@ def emps_why(out: pathlib.Path) -> str:
         "The loop's library holds Coulomb friction on the velocity (`velocity_friction`), "
         "fitted on the velocity and polished on the position; over the short validation "
         "record (the training record's last quarter) the candidates' position errors do "
-        "not rank them as the test record does (each run's `candidates.csv`), and the "
-        "chosen model drifts about as far as the linear peers"
+        f"not rank them as the test record does{_ranking(out)}, and the chosen model "
+        "drifts about as far as the linear peers"
+    )
+
+
+def _ranking(out: pathlib.Path) -> str:
+    """How EMPS's validation record ranked the loop's candidates against the test
+    (`benchmarks/emps_candidates.py`'s OUT/emps_candidates.csv), in a parenthesis."""
+    path = out / "emps_candidates.csv"
+    if not path.exists():
+        return " (each run's `candidates.csv`)"
+    import pandas as pd
+    import scipy.stats
+
+    table = pd.read_csv(path)
+    table = (
+        table[table["round"] > 0]
+        .replace([float("inf")], float("nan"))
+        .dropna(subset=["validation_nrmse", "training_mm", "test_mm"])
+    )
+    rho = scipy.stats.spearmanr(table["validation_nrmse"], table["test_mm"]).statistic
+    whole = scipy.stats.spearmanr(table["training_mm"], table["test_mm"]).statistic
+    return (
+        f" (`emps_candidates.md`: over the loop's {len(table)} candidates the validation "
+        f"NRMSE's rank correlation with the test RMSE is {rho:.2f}, the whole training "
+        f"record's free run's {whole:.2f}; their test RMSE runs from "
+        f"{table['test_mm'].min():.3g} to {table['test_mm'].max():.3g} mm)"
     )
 
 
