@@ -376,22 +376,13 @@ def loop_records(
             "(four orders) and adds curved branches itself where the residual asks for them "
             "(its effect general_backlash)."
         )
-    init_default = init_samples is None and _benchmark is None
-    if init_samples is None:
-        # the benchmark's own window (in samples after decimation), else the measured-data
-        # default of the scored records' lengths (`_defaults.init_samples`)
-        init_samples = (
-            _benchmark.init_samples
-            if _benchmark is not None
-            else _defaults.init_samples(len(r) for r in [*validation, *test])
-        )
     return _loop(
         estimation,
         validation,
         test,
         orders,
-        init_samples,
-        init_default=init_default,
+        _init_window(init_samples, _benchmark, validation, test),
+        init_default=init_samples is None and _benchmark is None,
         max_effects=max_effects,
         effects=effects,
         window=window,
@@ -678,19 +669,12 @@ def loop_command(settings: LoopSettings) -> LoopRun:
     )
     effects = None if s.effects is None else _effect_names(s.effects)
     estimation, validation, test, benchmark = _command_records(s)
-    init_samples = s.init_samples
-    if init_samples is None:  # as `loop_records`
-        init_samples = (
-            benchmark.init_samples
-            if benchmark is not None
-            else _defaults.init_samples(len(r) for r in [*validation, *test])
-        )
     return _loop(
         estimation,
         validation,
         test,
         s.orders,
-        init_samples,
+        _init_window(s.init_samples, benchmark, validation, test),
         init_default=s.init_samples is None and benchmark is None,
         max_effects=s.max_effects,
         effects=effects,
@@ -708,6 +692,17 @@ def loop_command(settings: LoopSettings) -> LoopRun:
         command=s.command,
         benchmark=benchmark,
     )
+
+
+def _init_window(init_samples, benchmark, validation, test) -> int:
+    """The state-initialisation window: `init_samples` where given, else the benchmark's
+    own (in samples after decimation), else the measured-data default of the scored
+    records' lengths (`_defaults.init_samples`)."""
+    if init_samples is not None:
+        return init_samples
+    if benchmark is not None:
+        return benchmark.init_samples
+    return _defaults.init_samples(len(r) for r in [*validation, *test])
 
 
 def _command_records(s: LoopSettings) -> tuple[list, list, list, Any]:
