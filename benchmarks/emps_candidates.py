@@ -59,12 +59,26 @@ def scorer(run):
     return score
 
 
+def ranking(table):
+    """`(candidates, rho_validation, rho_training)`: the rows of OUT.csv's `table` that
+    are candidates (round 1 on) with every figure finite, and Spearman's rank correlation
+    of their validation NRMSE and of their whole training record's RMSE with their test
+    RMSE."""
+    import scipy.stats
+
+    scored = ["validation_nrmse", "training_mm", "test_mm"]
+    candidates = table[table["round"] > 0]
+    finite = candidates[np.isfinite(candidates[scored]).all(axis=1)]
+    rho_val = scipy.stats.spearmanr(finite["validation_nrmse"], finite["test_mm"]).statistic
+    rho_train = scipy.stats.spearmanr(finite["training_mm"], finite["test_mm"]).statistic
+    return finite, rho_val, rho_train
+
+
 def main(argv=None) -> int:
     import jax
 
     jax.config.update("jax_enable_x64", True)
     import pandas as pd
-    import scipy.stats
 
     import jaxcascade as jc
     from jaxcascade._benchmark._timing import device_description
@@ -112,11 +126,7 @@ def main(argv=None) -> int:
     out = pathlib.Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     table.to_csv(out.with_suffix(".csv"), index=False)
-    candidates = table[table["round"] > 0]
-    scored = ["validation_nrmse", "training_mm", "test_mm"]
-    finite = candidates[np.isfinite(candidates[scored]).all(axis=1)]
-    rho_val = scipy.stats.spearmanr(finite["validation_nrmse"], finite["test_mm"]).statistic
-    rho_train = scipy.stats.spearmanr(finite["training_mm"], finite["test_mm"]).statistic
+    finite, rho_val, rho_train = ranking(table)
     best_val = finite.loc[finite["validation_nrmse"].idxmin()]
     best_test = finite.loc[finite["test_mm"].idxmin()]
     shown = table.copy()

@@ -93,16 +93,9 @@ def _ranking(out: pathlib.Path) -> str:
     if not path.exists():
         return " (each run's `candidates.csv`)"
     import pandas as pd
-    import scipy.stats
+    from emps_candidates import ranking
 
-    table = pd.read_csv(path)
-    table = (
-        table[table["round"] > 0]
-        .replace([float("inf")], float("nan"))
-        .dropna(subset=["validation_nrmse", "training_mm", "test_mm"])
-    )
-    rho = scipy.stats.spearmanr(table["validation_nrmse"], table["test_mm"]).statistic
-    whole = scipy.stats.spearmanr(table["training_mm"], table["test_mm"]).statistic
+    table, rho, whole = ranking(pd.read_csv(path))
     return (
         f" (`emps_candidates.md`: over the loop's {len(table)} candidates the validation "
         f"NRMSE's rank correlation with the test RMSE is {rho:.2f}, the whole training "
