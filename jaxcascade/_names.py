@@ -82,6 +82,11 @@ EFFECTS = {
         "static polynomial map between the cascade and output_dynamics added before it: "
         "y + c0 + c2 y^2 + c3 y^3 (the static part of a Wiener-Hammerstein sandwich)"
     ),
+    "inner_kink": (
+        "two-slope static map between the cascade and output_dynamics added before it: "
+        "y + c0 + c1 |y - s| + c2 (y - s)^2 (a diode, a rectifier stage that conducts "
+        "more one way: the static part of a Wiener-Hammerstein circuit)"
+    ),
 }
 
 # the loop's noise model, considered beside the effects, and its description

@@ -49,7 +49,8 @@ The definitions, and where they are documented:
 - the maps after the cascade (`_effects/_wiener.py`): `output_polynomial` `y + c0 + c2
   y^2 + c3 y^3`, and `inner_polynomial` the same map, acting just before the first
   `output_dynamics` when added after it; `output_fold` `c0 + c1 sqrt((y - s)^2 +
-  EPS^2) + c2 (y - s)^2`, EPS = 1e-3 (`FOLD_EPS`); `output_dynamics` `w(t) = y(t) +
+  EPS^2) + c2 (y - s)^2`, EPS = 1e-3 (`FOLD_EPS`); `inner_kink` `y` plus that map,
+  acting where `inner_polynomial` does; `output_dynamics` `w(t) = y(t) +
   sum_i beta_i y(t-i)`, `out(t) = w(t) - sum_j alpha_j out(t-j)`, from rest, plus
   `offset`.
 - `general_backlash` (`_effects/_curved.py`, `docs/general_backlash.md`): the cascade's
@@ -264,6 +265,9 @@ def _output_effect(name, p, y, x):
     if name == "output_fold":
         c0, c1, c2, s = p["coefficients"]
         return c0 + c1 * np.sqrt((y - s) ** 2 + FOLD_EPS**2) + c2 * (y - s) ** 2
+    if name == "inner_kink":
+        c0, c1, c2, s = p["coefficients"]
+        return y + c0 + c1 * np.sqrt((y - s) ** 2 + FOLD_EPS**2) + c2 * (y - s) ** 2
     if name == "output_dynamics":
         beta, alpha = np.atleast_1d(p["zeros"]), np.atleast_1d(p["poles"])
         out = np.zeros(len(y))
@@ -298,6 +302,7 @@ def _parallel(name, p, u):
 
 
 STRUCTURAL = ("dynamics_order", "pwl_segment")
+INNER = ("inner_polynomial", "inner_kink")
 KNOWN = (
     "output_offset",
     "output_drift",
@@ -316,6 +321,7 @@ KNOWN = (
     "output_fold",
     "output_dynamics",
     "inner_polynomial",
+    "inner_kink",
     *STRUCTURAL,
 )
 
@@ -347,12 +353,13 @@ def simulate(model, u, effective: dict | None = None) -> np.ndarray:
         if name == "general_backlash":  # in place of the cascade's straight backlash
             curves = (np.atleast_1d(p["curveL"]), np.atleast_1d(p["curveR"]))
             y = general_backlash(x, P["cL"], P["mR"], P["cR"], *curves)
-    # in the order added, but an inner_polynomial acts just before the first
-    # output_dynamics (the static part of the sandwich)
+    # in the order added, but an inner map (inner_polynomial, inner_kink) acts just before
+    # the first output_dynamics (the static part of the sandwich)
     block = next((i for i, (name, _) in enumerate(effects) if name == "output_dynamics"), None)
     if block is not None:
-        inner = [e for i, e in enumerate(effects) if i > block and e[0] == "inner_polynomial"]
-        rest = [e for i, e in enumerate(effects) if not (i > block and e[0] == "inner_polynomial")]
+        moved = [i > block and e[0] in INNER for i, e in enumerate(effects)]
+        inner = [e for e, m in zip(effects, moved, strict=True) if m]
+        rest = [e for e, m in zip(effects, moved, strict=True) if not m]
         at = next(i for i, (name, _) in enumerate(rest) if name == "output_dynamics")
         effects = rest[:at] + inner + rest[at:]
     for name, p in effects:

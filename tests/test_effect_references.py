@@ -24,6 +24,7 @@ from jaxcascade._measured._effects import (
     CurvedBacklash,
     DahlFriction,
     ExtendedModel,
+    InnerKink,
     InnerPolynomial,
     InputBacklash,
     InputDelay,
@@ -80,6 +81,11 @@ MODELS = {
     "inner_polynomial": lambda: _with(
         OutputDynamics(jnp.array([0.4]), jnp.array([-0.6]), jnp.asarray(0.0)),
         InnerPolynomial(jnp.array([0.0, 0.15, -0.08])),
+    ),
+    # a two-slope (diode-like) map between the two linear blocks
+    "inner_kink": lambda: _with(
+        OutputDynamics(jnp.array([0.4]), jnp.array([-0.6]), jnp.asarray(0.0)),
+        InnerKink(jnp.array([0.0, 0.5, 0.0, 0.1])),
     ),
 }
 

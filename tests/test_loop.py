@@ -21,6 +21,7 @@ import jaxcascade as jc
 from jaxcascade._measured._effects import (
     EFFECTS,
     ExtendedModel,
+    InnerKink,
     OutputOffset,
     plain,
     simulate_extended,
@@ -175,6 +176,27 @@ def test_loop_builds_a_sandwich_whichever_block_comes_first():
     assert result.after.error <= 1.5 / SNR
 
 
+def test_loop_finds_a_diode_between_the_two_blocks():
+    # Example 1, a two-slope map (slopes 1.5 and 0.5 about zero, a diode's) and the
+    # dynamics of output_dynamics's record: the loop adds the second block, then the
+    # kink between the blocks, not the smooth polynomial there
+    dynamics = UNDECLARED["output_dynamics"]()[0].effects[0]
+    kinked = UNDECLARED[None]()[0]
+    model = kinked.with_(effects=(InnerKink(jnp.array([0.0, 0.5, 0.0, 0.0])), dynamics))
+    u, y = undeclared_record(model, jax.random.PRNGKey(1), N, SNR)
+    u_val, y_val = undeclared_record(model, jax.random.PRNGKey(2), N, SNR)
+    library = ("output_dynamics", "inner_polynomial", "inner_kink")
+    result = model_error_loop(
+        u, y, u_val, y_val, jc.Orders(), effects=library, init_samples=0, max_effects=2
+    )
+    assert result.added == ["output_dynamics", "inner_kink"], result.added
+    assert result.final.structure().endswith("backlash -> inner_kink -> output_dynamics -> y")
+    assert result.after.error <= 1.5 / SNR
+    (kink,) = [c for c in result.candidates if c.name == "inner_kink"]
+    (smooth,) = [c for c in result.candidates if c.name == "inner_polynomial"]
+    assert kink.error < smooth.error
+
+
 def test_every_effect_declares_a_signature():
     tests = {
         "autocorrelation",
@@ -257,8 +279,10 @@ def test_every_effect_of_the_library_has_an_undeclared_record():
         "input_backlash",
         "general_backlash",
         # the static part of a sandwich whose second block came first: its record has
-        # two effects (test_loop_builds_a_sandwich_whichever_block_comes_first)
+        # two effects (test_loop_builds_a_sandwich_whichever_block_comes_first,
+        # test_loop_finds_a_diode_between_the_two_blocks)
         "inner_polynomial",
+        "inner_kink",
     }
     assert records | own_tests == {*EFFECTS, ARNoise.name}
     assert not records & own_tests

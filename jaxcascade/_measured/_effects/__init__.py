@@ -108,6 +108,9 @@ from ._hysteresis import (
     SlackFriction as SlackFriction,
 )
 from ._wiener import (
+    InnerKink as InnerKink,
+)
+from ._wiener import (
     InnerPolynomial as InnerPolynomial,
 )
 from ._wiener import (
@@ -144,6 +147,7 @@ EFFECTS: dict[str, type[Effect]] = {
         OutputFold,
         OutputDynamics,
         InnerPolynomial,
+        InnerKink,
     )
 }
 # tried only when a test of their signature failed: the hysteresis paths and the curved

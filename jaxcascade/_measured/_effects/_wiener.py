@@ -17,6 +17,12 @@ the sensor or the output stage, and with dynamics after it:
   the loop adds one effect a round, and on a sandwich the second block may explain more
   of the residual than the static map and come first; without it the static map could
   then only go after the second block.
+- `InnerKink` (`inner_kink`): `y + c0 + c1 |y - s| + c2 (y - s)^2` at the same place: a
+  static part with two slopes about the level `s` (ratio `(1 + c1) / (1 - c1)`), a diode
+  or an amplifier stage that conducts more one way, which a cubic follows only roughly
+  (the Wiener-Hammerstein stand-in of `benchmarks/stand_in_benchmarks.py`, a diode-like
+  curve between two Chebyshev filters: 16.76 mV with `inner_polynomial`, 5.74 mV with
+  it). The absolute value is smoothed over `EPS` as the fold's.
 - `OutputDynamics` (`output_dynamics`): a second linear block after the static part,
   `y_out = (1 + beta_1 q^-1 + ..) / (1 + alpha_1 q^-1 + ..) y + c` (unit gain at high
   frequency: the cascade holds the gain; a block of unit gain at zero frequency instead
@@ -31,7 +37,8 @@ past inputs (`u2_e`, `u2_e2`, `e_eu`) and of the level of the input and the outp
 it leave a coloured error correlated with the input (`autocorrelation`,
 `cross_correlation`, `spectrum`). Starts: the polynomial's coefficients regressed on the
 current output's powers (not tried where they explain less than `_feedback.MIN_EXPLAINED`
-of the residual), the fold at the lower quantiles of the current output (where a
+of the residual), the kink's likewise with `s` at three quantiles of the signal entering
+the second block, the fold at the lower quantiles of the current output (where a
 sign-blind output touches zero), the dynamics at the filter from the current output to
 the measured one (equation error), or where none is found at the identity and at two
 stable pairs.
@@ -58,8 +65,8 @@ def _outputs(model, records):
 
 def _static(model) -> bool:
     """Whether `model` has a static map after the cascade (`OutputPolynomial`,
-    `OutputFold`)."""
-    return any(isinstance(e, OutputPolynomial | OutputFold) for e in model.effects)
+    `OutputFold`, `InnerKink`)."""
+    return any(isinstance(e, OutputPolynomial | OutputFold | InnerKink) for e in model.effects)
 
 
 def _polynomial_starts(cls, model, X, r) -> list[Start]:
@@ -306,3 +313,80 @@ class InnerPolynomial(OutputPolynomial):
             rows.append(np.stack([scipy.signal.lfilter(b, a, c) for c in columns], axis=1))
             targets.append(np.asarray(res, float))
         return _polynomial_starts(cls, model, np.concatenate(rows), np.concatenate(targets))
+
+
+def _inner_signal(model, records):
+    """`(block, signals)`: the first second block of `model` (`second_block`) and, per
+    record, the signal entering it (the model without it and without the output maps
+    added after it); `(None, [])` where `model` has none."""
+    at = next((i for i, e in enumerate(model.effects) if type(e).second_block), None)
+    if at is None:
+        return None, []
+    before = model.with_(
+        effects=tuple(
+            e for i, e in enumerate(model.effects) if i < at or type(e).output is Effect.output
+        )
+    )
+    signals = [
+        np.asarray(simulate_padded(before, np.asarray(u, float))[0], float) for u, _, _ in records
+    ]
+    return model.effects[at], signals
+
+
+class InnerKink(Effect):
+    name: ClassVar[str] = "inner_kink"
+    signature: ClassVar[tuple[str, ...]] = ("u2_e", "u2_e2", "e_eu", "level", "branch")
+    description: ClassVar[str] = (
+        "two-slope static map between the cascade and output_dynamics added before it: "
+        "y + c0 + c1 |y - s| + c2 (y - s)^2 (a diode, a rectifier stage that conducts "
+        "more one way: the static part of a Wiener-Hammerstein circuit)"
+    )
+    needs_signature: ClassVar[bool] = True
+    inner: ClassVar[bool] = True
+    EPS: ClassVar[float] = 1e-3
+    quantiles: ClassVar[tuple[float, ...]] = (0.2, 0.5, 0.8)
+
+    # y + c0 + c1 |y - s| + c2 (y - s)^2: c0 a change of the output, the kink a level of
+    # the record's output; c1 unitless, c2 per output
+    units: ClassVar[dict] = {
+        "coefficients": ("output", "unitless", "output_power(2)", "output_level")
+    }
+
+    coefficients: Float[Array, " 4"]  # c0, c1, c2, s
+
+    def output(self, y, x):
+        c = self.coefficients.astype(y.dtype)
+        d = y - c[3]
+        return y + c[0] + c[1] * jnp.sqrt(d * d + self.EPS**2) + c[2] * d * d
+
+    @classmethod
+    def starts_records(cls, model, records):
+        if _static(model):
+            return []
+        block, signals = _inner_signal(model, records)
+        if block is None or not all(np.all(np.isfinite(h)) for h in signals):
+            return []
+        b = np.concatenate([[1.0], np.asarray(block.zeros, float)])
+        a = np.concatenate([[1.0], np.asarray(block.poles, float)])
+        r = np.concatenate([np.asarray(res, float) for _, _, res in records])
+        values = []
+        for s in np.quantile(np.concatenate(signals), cls.quantiles):
+            rows = []
+            for h in signals:
+                d = h - s
+                columns = [np.ones_like(h), np.sqrt(d * d + cls.EPS**2), d * d]
+                rows.append(np.stack([scipy.signal.lfilter(b, a, c) for c in columns], axis=1))
+            X = np.concatenate(rows)
+            if X.shape[0] < 30:
+                continue
+            fit, share = explained(X, r)
+            if share >= MIN_EXPLAINED:
+                values.append([*fit, s])
+        if not values:
+            return []
+        effect = _batched(cls, coefficients=np.array(values))
+        return [Start(cls.name, model.orders, _repeat(model, len(values)), effect)]
+
+    @classmethod
+    def starts(cls, model, u, y, residual):
+        return cls.starts_records(model, [(u, y, residual)])
