@@ -865,7 +865,8 @@ def _grouped(loop):
             *_records(given["u_est"], given["y_est"])[0],
             *_records(given["u_val"], given["y_val"])[0],
         )
-        lengths = [np.shape(u)[-1] for u in records]
+        # a record that is not 1-D is refused by the loop's own checks, with its name
+        lengths = [np.shape(u)[0] for u in records if np.ndim(u) == 1]
         with (
             grouping([EFFECTS[name] for name in names if name in EFFECTS], EFFECTS.values()),
             padded_to(lengths),
@@ -979,8 +980,6 @@ def model_error_loop(
         raise ValueError(
             f"model_error_loop: {len(u_vals)} validation inputs but {len(y_vals)} outputs."
         )
-    if init_samples is None:  # the command's default window (`_defaults.init_samples`)
-        init_samples = _defaults.init_samples(np.shape(u)[-1] for u in u_vals)
     several = len(u_vals) > 1
     checked = [
         record(
@@ -992,6 +991,8 @@ def model_error_loop(
         )
         for i, (u, y) in enumerate(zip(u_vals, y_vals, strict=True))
     ]
+    if init_samples is None:  # the command's default window (`_defaults.init_samples`)
+        init_samples = _defaults.init_samples(int(u.shape[0]) for u, _ in checked)
     for i, (u, _) in enumerate(checked):
         where = f"validation record {i + 1}" if several else "validation"
         check_scored_length(int(u.shape[0]), init_samples, f"model_error_loop ({where})")
