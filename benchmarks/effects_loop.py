@@ -4,16 +4,18 @@
 
 Each record is Example 1 with one effect of the library present but not declared
 (`jaxcascade._measured._testing.UNDECLARED`), at SNR 20 (noise floor 1/SNR = 0.05), 2000
-estimation and 2000 validation samples with independent inputs and noise; plus a
-record with no extra effect; plus the force and position of an axis under proportional
-control with Coulomb friction (`_testing.INTEGRATING`, `axis_record`: the loop models the
+estimation and 2000 validation samples with independent inputs and noise; plus a record
+with no extra effect; plus the force and position of an axis under proportional control
+with Coulomb friction (`_testing.INTEGRATING`, `axis_record`: the loop models the
 position's difference, `integrating=True`, and its NRMSE is the position's; its noise is
 the position's, at SNR 20 of the velocity, so the floor is not 1/SNR there: `-` in the
-floor column). Writes OUT.csv and OUT.md: the effect present, the
-effects the loop added, NRMSE before and after, the ratio to the noise floor, and the
-runtime. Each record's row is appended to OUT.rows.jsonl as it finishes, and a run
-started again with the same settings resumes from it (`--fresh` starts over); the file
-is removed once the tables are written.
+floor column); plus the Wiener-Hammerstein sandwiches of the inner maps
+(`_testing.SANDWICHES`: a static map between the cascade and a second linear block, two
+effects, named when the loop adds the two, in either block's order). Writes OUT.csv and
+OUT.md: the effect present, the effects the loop added, NRMSE before and after, the
+ratio to the noise floor, and the runtime. Each record's row is appended to
+OUT.rows.jsonl as it finishes, and a run started again with the same settings resumes
+from it (`--fresh` starts over); the file is removed once the tables are written.
 """
 
 from __future__ import annotations
@@ -44,6 +46,7 @@ def main(argv=None) -> int:
     import jaxcascade as jc
     from jaxcascade._measured._testing import (
         INTEGRATING,
+        SANDWICHES,
         UNDECLARED,
         axis_record,
         undeclared_record,
@@ -53,10 +56,13 @@ def main(argv=None) -> int:
     settings = {"seed": args.seed, "snr": args.snr, "n": args.n}
     done, partial = open_rows(out, settings, lambda row: row["effect_present"], args.fresh)
     rows = []
-    cases = [(name, False) for name in UNDECLARED]
-    cases += [(name, True) for name in INTEGRATING if name is not None]
-    for name, integrating in cases:
-        label = (name or "none") + (" (integrating axis)" if integrating else "")
+    cases = [(name, "effect") for name in UNDECLARED]
+    cases += [(name, "integrating") for name in INTEGRATING if name is not None]
+    cases += [(name, "sandwich") for name in SANDWICHES]
+    suffixes = {"effect": "", "integrating": " (integrating axis)", "sandwich": " (sandwich)"}
+    for name, kind in cases:
+        integrating, sandwich = kind == "integrating", kind == "sandwich"
+        label = (name or "none") + suffixes[kind]
         if label in done:
             rows.append(done[label])
             continue
@@ -68,7 +74,7 @@ def main(argv=None) -> int:
             u_val, y_val = axis_record(k_val, args.n + 1, args.snr, friction)
             u, y, u_val, y_val = u[1:], np.diff(y), u_val[1:], np.diff(y_val)
         else:
-            model, ar = UNDECLARED[name]()
+            model, ar = UNDECLARED[name]() if not sandwich else (SANDWICHES[name]()[0], None)
             u, y = undeclared_record(model, k_est, args.n, args.snr, ar)
             u_val, y_val = undeclared_record(model, k_val, args.n, args.snr, ar)
         start = time.perf_counter()
@@ -79,7 +85,11 @@ def main(argv=None) -> int:
             {
                 "effect_present": label,
                 "effect_added": ",".join(result.added) or "none",
-                "named": bool(result.added == ([name] if name else [])),
+                "named": bool(
+                    result.added in SANDWICHES[name]()[1]
+                    if sandwich
+                    else result.added == ([name] if name else [])
+                ),
                 "nrmse_before": float(result.before.error),
                 "nrmse_after": float(result.after.error),
                 "after_over_floor": None if integrating else float(result.after.error * args.snr),

@@ -84,7 +84,7 @@ EFFECTS = {
     ),
     "inner_kink": (
         "two-slope static map between the cascade and output_dynamics added before it: "
-        "y + c0 + c1 |y - s| + c2 (y - s)^2 (a diode, a rectifier stage that conducts "
+        "y + c0 + c1 |y - s| (a diode, a rectifier stage that conducts "
         "more one way: the static part of a Wiener-Hammerstein circuit)"
     ),
 }

@@ -49,8 +49,8 @@ The definitions, and where they are documented:
 - the maps after the cascade (`_effects/_wiener.py`): `output_polynomial` `y + c0 + c2
   y^2 + c3 y^3`, and `inner_polynomial` the same map, acting just before the first
   `output_dynamics` when added after it; `output_fold` `c0 + c1 sqrt((y - s)^2 +
-  EPS^2) + c2 (y - s)^2`, EPS = 1e-3 (`FOLD_EPS`); `inner_kink` `y` plus that map,
-  acting where `inner_polynomial` does; `output_dynamics` `w(t) = y(t) +
+  EPS^2) + c2 (y - s)^2`, EPS = 1e-3 (`FOLD_EPS`); `inner_kink` `y + c0 + c1 sqrt((y -
+  s)^2 + EPS^2)`, acting where `inner_polynomial` does; `output_dynamics` `w(t) = y(t) +
   sum_i beta_i y(t-i)`, `out(t) = w(t) - sum_j alpha_j out(t-j)`, from rest, plus
   `offset`.
 - `general_backlash` (`_effects/_curved.py`, `docs/general_backlash.md`): the cascade's
@@ -266,8 +266,8 @@ def _output_effect(name, p, y, x):
         c0, c1, c2, s = p["coefficients"]
         return c0 + c1 * np.sqrt((y - s) ** 2 + FOLD_EPS**2) + c2 * (y - s) ** 2
     if name == "inner_kink":
-        c0, c1, c2, s = p["coefficients"]
-        return y + c0 + c1 * np.sqrt((y - s) ** 2 + FOLD_EPS**2) + c2 * (y - s) ** 2
+        c0, c1, s = p["coefficients"]
+        return y + c0 + c1 * np.sqrt((y - s) ** 2 + FOLD_EPS**2)
     if name == "output_dynamics":
         beta, alpha = np.atleast_1d(p["zeros"]), np.atleast_1d(p["poles"])
         out = np.zeros(len(y))

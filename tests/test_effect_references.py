@@ -85,7 +85,7 @@ MODELS = {
     # a two-slope (diode-like) map between the two linear blocks
     "inner_kink": lambda: _with(
         OutputDynamics(jnp.array([0.4]), jnp.array([-0.6]), jnp.asarray(0.0)),
-        InnerKink(jnp.array([0.0, 0.5, 0.0, 0.1])),
+        InnerKink(jnp.array([0.0, 0.5, 0.1])),
     ),
 }
 

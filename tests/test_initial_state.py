@@ -83,7 +83,7 @@ INSTANCES = {
     "output_fold": OutputFold(jnp.array([0.0, 1.0, 0.0, -0.4])),
     "output_dynamics": OutputDynamics(jnp.array([0.4]), jnp.array([-0.6]), jnp.asarray(0.1)),
     "inner_polynomial": InnerPolynomial(jnp.array([0.0, 0.15, -0.08])),
-    "inner_kink": InnerKink(jnp.array([0.0, 0.5, 0.0, 0.1])),
+    "inner_kink": InnerKink(jnp.array([0.0, 0.5, 0.1])),
 }
 
 

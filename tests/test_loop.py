@@ -182,7 +182,7 @@ def test_loop_finds_a_diode_between_the_two_blocks():
     # kink between the blocks, not the smooth polynomial there
     dynamics = UNDECLARED["output_dynamics"]()[0].effects[0]
     kinked = UNDECLARED[None]()[0]
-    model = kinked.with_(effects=(InnerKink(jnp.array([0.0, 0.5, 0.0, 0.0])), dynamics))
+    model = kinked.with_(effects=(InnerKink(jnp.array([0.0, 0.5, 0.0])), dynamics))
     u, y = undeclared_record(model, jax.random.PRNGKey(1), N, SNR)
     u_val, y_val = undeclared_record(model, jax.random.PRNGKey(2), N, SNR)
     library = ("output_dynamics", "inner_polynomial", "inner_kink")

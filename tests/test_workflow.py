@@ -258,7 +258,7 @@ def _effect_examples():
         "output_fold": E.OutputFold(a([0.1, 1.0, 0.1, -20.0])),
         "output_dynamics": E.OutputDynamics(a([0.2, 0.1]), a([-0.5, 0.0625]), a(0.1)),
         "inner_polynomial": E.InnerPolynomial(a([0.1, 0.2, -0.05])),
-        "inner_kink": E.InnerKink(a([0.1, 0.5, 0.1, 20.0])),
+        "inner_kink": E.InnerKink(a([0.1, 0.5, 20.0])),
     }
 
 

@@ -44,7 +44,7 @@ loop's results, `jaxcascade fit --json`, `jaxcascade loop --json`, `report.json`
   - `output_polynomial`, `inner_polynomial`: `c0, c2, c3` of `(y - y_offset)^k` times
     `y_scale ** (1 - k)`; `output_fold`: `c0` and `s` levels of the record's output,
     `c1` unitless, `c2` over `y_scale`; `inner_kink`: `c0` times `y_scale`, `s` a level
-    of the record's output, `c1` unitless, `c2` over `y_scale`; `nonlinear_feedback`:
+    of the record's output, `c1` unitless; `nonlinear_feedback`:
     `k2, k3` of `x^k` times `y_scale ** (1 - k)`; `general_backlash`: as the cascade's
     `mL_i`, `mR_i`.
   - `input_delay.delay` (samples), `output_feedthrough.gain`, `direct_term.gain`,

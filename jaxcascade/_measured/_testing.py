@@ -18,6 +18,7 @@ from ._effects import (
     CurvedBacklash,
     DirectTerm,
     ExtendedModel,
+    InnerKink,
     InputDelay,
     NonlinearFeedback,
     OutputDrift,
@@ -88,6 +89,28 @@ UNDECLARED = {
         None,
     ),
     None: lambda: (plain(_example1()), None),
+}
+
+
+def _sandwich(static):
+    """Example 1, the static map `static` and the second block of `output_dynamics`'s
+    record after it: a Wiener-Hammerstein sandwich around the backlash."""
+    model, _ = UNDECLARED["output_dynamics"]()
+    return model.with_(effects=(static, *model.effects))
+
+
+# Sandwiches whose static part the loop adds as an inner map (`Effect.inner`): the second
+# block may come first and the map then goes between the two blocks. Each entry: the
+# model, and the effects that name it, in the order either block may come.
+SANDWICHES = {
+    "inner_polynomial": lambda: (
+        _sandwich(OutputPolynomial(_vector(0.0, 0.15, -0.08))),
+        (["output_dynamics", "inner_polynomial"], ["output_polynomial", "output_dynamics"]),
+    ),
+    "inner_kink": lambda: (
+        _sandwich(InnerKink(_vector(0.0, 0.5, 0.0))),
+        (["output_dynamics", "inner_kink"],),
+    ),
 }
 
 # Records whose output integrates its input (`axis_record`): the force and position of

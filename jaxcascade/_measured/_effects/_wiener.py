@@ -17,12 +17,14 @@ the sensor or the output stage, and with dynamics after it:
   the loop adds one effect a round, and on a sandwich the second block may explain more
   of the residual than the static map and come first; without it the static map could
   then only go after the second block.
-- `InnerKink` (`inner_kink`): `y + c0 + c1 |y - s| + c2 (y - s)^2` at the same place: a
-  static part with two slopes about the level `s` (ratio `(1 + c1) / (1 - c1)`), a diode
-  or an amplifier stage that conducts more one way, which a cubic follows only roughly
-  (the Wiener-Hammerstein stand-in of `benchmarks/stand_in_benchmarks.py`, a diode-like
-  curve between two Chebyshev filters: 16.76 mV with `inner_polynomial`, 5.74 mV with
-  it). The absolute value is smoothed over `EPS` as the fold's.
+- `InnerKink` (`inner_kink`): `y + c0 + c1 |y - s|` at the same place: a static part
+  with two slopes about the level `s` (ratio `(1 + c1) / (1 - c1)`), a diode or an
+  amplifier stage that conducts more one way, which a cubic follows only roughly (the
+  Wiener-Hammerstein stand-in of `benchmarks/stand_in_benchmarks.py`, a diode-like curve
+  between two Chebyshev filters: 16.76 mV with `inner_polynomial`, 4.84 mV with it). No
+  square term: with one, the kink also fitted a cubic map better than the polynomial
+  did and took its place on a polynomial sandwich. The absolute value is smoothed over
+  `EPS` as the fold's.
 - `OutputDynamics` (`output_dynamics`): a second linear block after the static part,
   `y_out = (1 + beta_1 q^-1 + ..) / (1 + alpha_1 q^-1 + ..) y + c` (unit gain at high
   frequency: the cascade holds the gain; a block of unit gain at zero frequency instead
@@ -338,7 +340,7 @@ class InnerKink(Effect):
     signature: ClassVar[tuple[str, ...]] = ("u2_e", "u2_e2", "e_eu", "level", "branch")
     description: ClassVar[str] = (
         "two-slope static map between the cascade and output_dynamics added before it: "
-        "y + c0 + c1 |y - s| + c2 (y - s)^2 (a diode, a rectifier stage that conducts "
+        "y + c0 + c1 |y - s| (a diode, a rectifier stage that conducts "
         "more one way: the static part of a Wiener-Hammerstein circuit)"
     )
     needs_signature: ClassVar[bool] = True
@@ -346,18 +348,16 @@ class InnerKink(Effect):
     EPS: ClassVar[float] = 1e-3
     quantiles: ClassVar[tuple[float, ...]] = (0.2, 0.5, 0.8)
 
-    # y + c0 + c1 |y - s| + c2 (y - s)^2: c0 a change of the output, the kink a level of
-    # the record's output; c1 unitless, c2 per output
-    units: ClassVar[dict] = {
-        "coefficients": ("output", "unitless", "output_power(2)", "output_level")
-    }
+    # y + c0 + c1 |y - s|: c0 a change of the output, the kink a level of the record's
+    # output; c1 unitless
+    units: ClassVar[dict] = {"coefficients": ("output", "unitless", "output_level")}
 
-    coefficients: Float[Array, " 4"]  # c0, c1, c2, s
+    coefficients: Float[Array, " 3"]  # c0, c1, s
 
     def output(self, y, x):
         c = self.coefficients.astype(y.dtype)
-        d = y - c[3]
-        return y + c[0] + c[1] * jnp.sqrt(d * d + self.EPS**2) + c[2] * d * d
+        d = y - c[2]
+        return y + c[0] + c[1] * jnp.sqrt(d * d + self.EPS**2)
 
     @classmethod
     def starts_records(cls, model, records):
@@ -374,7 +374,7 @@ class InnerKink(Effect):
             rows = []
             for h in signals:
                 d = h - s
-                columns = [np.ones_like(h), np.sqrt(d * d + cls.EPS**2), d * d]
+                columns = [np.ones_like(h), np.sqrt(d * d + cls.EPS**2)]
                 rows.append(np.stack([scipy.signal.lfilter(b, a, c) for c in columns], axis=1))
             X = np.concatenate(rows)
             if X.shape[0] < 30:
