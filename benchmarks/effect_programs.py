@@ -74,7 +74,11 @@ def child(case: str, n: int) -> dict:
         # record: their synthetic record's values (`_testing`) make the same programs
         if name in UNDECLARED:
             return UNDECLARED[name]()[0].effects[-1]
-        values = {"velocity_friction": (0.3, 0.4), "inner_polynomial": (0.0, 0.15, -0.08)}
+        values = {
+            "velocity_friction": (0.3, 0.4),
+            "inner_polynomial": (0.0, 0.15, -0.08),
+            "inner_kink": (0.0, 0.5, 0.0),
+        }
         return LIBRARY[name](jnp.asarray(values[name])) if name in values else None
 
     def start(name):
