@@ -294,27 +294,15 @@ class InnerPolynomial(OutputPolynomial):
 
     @classmethod
     def starts_records(cls, model, records):
-        at = next((i for i, e in enumerate(model.effects) if type(e).second_block), None)
-        if at is None or _static(model):
+        if _static(model):
             return []
-        block = model.effects[at]
-        # the signal entering the output dynamics: the model without them and without
-        # the output maps added after them
-        before = model.with_(
-            effects=tuple(
-                e for i, e in enumerate(model.effects) if i < at or type(e).output is Effect.output
-            )
-        )
-        b = np.concatenate([[1.0], np.asarray(block.zeros, float)])
-        a = np.concatenate([[1.0], np.asarray(block.poles, float)])
-        rows, targets = [], []
-        for u, _, res in records:
-            h = np.asarray(simulate_padded(before, np.asarray(u, float))[0], float)
-            # the powers of that signal through the second block (from rest, as it runs)
-            columns = [np.ones_like(h), h**2, h**3]
-            rows.append(np.stack([scipy.signal.lfilter(b, a, c) for c in columns], axis=1))
-            targets.append(np.asarray(res, float))
-        return _polynomial_starts(cls, model, np.concatenate(rows), np.concatenate(targets))
+        block, signals = _inner_signal(model, records)
+        if block is None:
+            return []
+        # the powers of that signal through the second block (from rest, as it runs)
+        X = np.concatenate([_through(block, [np.ones_like(h), h**2, h**3]) for h in signals])
+        r = np.concatenate([np.asarray(res, float) for _, _, res in records])
+        return _polynomial_starts(cls, model, X, r)
 
 
 def _inner_signal(model, records):
@@ -333,6 +321,14 @@ def _inner_signal(model, records):
         np.asarray(simulate_padded(before, np.asarray(u, float))[0], float) for u, _, _ in records
     ]
     return model.effects[at], signals
+
+
+def _through(block, columns) -> np.ndarray:
+    """The signals `columns` through the second block `block` (from rest, as it runs),
+    stacked as the columns of a regression."""
+    b = np.concatenate([[1.0], np.asarray(block.zeros, float)])
+    a = np.concatenate([[1.0], np.asarray(block.poles, float)])
+    return np.stack([scipy.signal.lfilter(b, a, c) for c in columns], axis=1)
 
 
 class InnerKink(Effect):
@@ -366,17 +362,15 @@ class InnerKink(Effect):
         block, signals = _inner_signal(model, records)
         if block is None or not all(np.all(np.isfinite(h)) for h in signals):
             return []
-        b = np.concatenate([[1.0], np.asarray(block.zeros, float)])
-        a = np.concatenate([[1.0], np.asarray(block.poles, float)])
         r = np.concatenate([np.asarray(res, float) for _, _, res in records])
         values = []
         for s in np.quantile(np.concatenate(signals), cls.quantiles):
-            rows = []
-            for h in signals:
-                d = h - s
-                columns = [np.ones_like(h), np.sqrt(d * d + cls.EPS**2)]
-                rows.append(np.stack([scipy.signal.lfilter(b, a, c) for c in columns], axis=1))
-            X = np.concatenate(rows)
+            X = np.concatenate(
+                [
+                    _through(block, [np.ones_like(h), np.sqrt((h - s) ** 2 + cls.EPS**2)])
+                    for h in signals
+                ]
+            )
             if X.shape[0] < 30:
                 continue
             fit, share = explained(X, r)
