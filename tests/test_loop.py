@@ -197,6 +197,27 @@ def test_loop_finds_a_diode_between_the_two_blocks():
     assert kink.error < smooth.error
 
 
+def test_a_kink_refines_a_static_map_already_before_the_second_block():
+    # The loop may add a cubic before the second block exists (output_polynomial, then
+    # output_dynamics after it): the kink is still tried between the blocks, after the
+    # cubic, so that a diode is not left to a cubic fitted without the second block;
+    # once a kink is there, no second one is
+    from jaxcascade._measured._effects import OutputPolynomial
+
+    dynamics = UNDECLARED["output_dynamics"]()[0].effects[0]
+    base = UNDECLARED[None]()[0]
+    truth = base.with_(effects=(InnerKink(jnp.array([0.0, 0.5, 0.0])), dynamics))
+    u, y = undeclared_record(truth, jax.random.PRNGKey(1), N, SNR)
+    cubic = OutputPolynomial(jnp.array([0.0, 0.0, -0.05]))
+    model = base.with_(effects=(cubic, dynamics))
+    residual = np.asarray(y) - np.asarray(simulate_extended(model, u)[0])
+    starts = InnerKink.starts_records(model, [(u, y, residual)])
+    assert [s.label for s in starts] == ["inner_kink"]
+    kinked = model.with_(effects=(*model.effects, InnerKink(jnp.array([0.0, 0.5, 0.0]))))
+    assert kinked.structure().endswith("output_polynomial -> inner_kink -> output_dynamics -> y")
+    assert InnerKink.starts_records(kinked, [(u, y, residual)]) == []
+
+
 def test_every_effect_declares_a_signature():
     tests = {
         "autocorrelation",

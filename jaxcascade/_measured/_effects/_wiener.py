@@ -24,7 +24,10 @@ the sensor or the output stage, and with dynamics after it:
   between two Chebyshev filters: 16.76 mV with `inner_polynomial`, 4.84 mV with it). No
   square term: with one, the kink also fitted a cubic map better than the polynomial
   did and took its place on a polynomial sandwich. The absolute value is smoothed over
-  `EPS` as the fold's.
+  `EPS` as the fold's. Unlike the other static maps it is tried where one is already in
+  place (once: not after another kink): the loop may add a cubic before the second block
+  exists, fitted without it (the stand-in at `--seed 1` adds `output_polynomial`, then
+  `output_dynamics`), and the kink then goes after that cubic, between the blocks.
 - `OutputDynamics` (`output_dynamics`): a second linear block after the static part,
   `y_out = (1 + beta_1 q^-1 + ..) / (1 + alpha_1 q^-1 + ..) y + c` (unit gain at high
   frequency: the cascade holds the gain; a block of unit gain at zero frequency instead
@@ -357,7 +360,8 @@ class InnerKink(Effect):
 
     @classmethod
     def starts_records(cls, model, records):
-        if _static(model):
+        # tried after a static map as well (see the module's docstring), once
+        if any(isinstance(e, InnerKink) for e in model.effects):
             return []
         block, signals = _inner_signal(model, records)
         if block is None or not all(np.all(np.isfinite(h)) for h in signals):
