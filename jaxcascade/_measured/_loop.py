@@ -1145,7 +1145,7 @@ def model_error_loop(
         with _Workers(threads) as workers:
             pending, queue, drain = [], iter(tasks), False
             while True:
-                while not drain and len(pending) < workers.ahead:
+                while not drain and workers.unfinished(f for *_, f in pending) < workers.ahead:
                     task = next(queue, None)
                     if task is None:
                         break
@@ -1155,12 +1155,16 @@ def model_error_loop(
                     saved = store.load(item)
                     future = workers.submit(_candidate_work, name, action, saved, context)
                     pending.append((task, item, saved, future))
+                    # past the bound, no new candidate until those in flight are reported
+                    drain = workers.pool is not None and over_bound()
                 if not pending:
                     if drain:  # the bound's release waited for the candidates in flight
                         bound()
                         drain = False
                         continue
                     break
+                if not drain and workers.wait(pending[0][3], (f for *_, f in pending)):
+                    continue  # another candidate finished first: keep the threads busy
                 (k, name, action), item, saved, future = pending.pop(0)
                 announce(k, name, saved is not None)
                 c, seconds, p_value = future.result()
@@ -1402,8 +1406,9 @@ class _Workers:
 
     def __init__(self, threads: int):
         self.size = int(threads)
-        # candidates submitted at most: two more than the threads, so that a long one
-        # (reported before the others) leaves no thread idle behind it
+        # candidates queued or running at most: two more than the threads; finished ones
+        # waiting to be reported in order do not count, so that a long one (reported
+        # before the others) leaves no thread idle behind it
         self.ahead = self.size + 2 if self.size > 1 else 1
         self.pool = None
         if self.size > 1:
@@ -1412,6 +1417,24 @@ class _Workers:
             self.pool = concurrent.futures.ThreadPoolExecutor(
                 self.size, thread_name_prefix="jaxcascade-candidate"
             )
+
+    def unfinished(self, futures) -> int:
+        """How many of `futures` (this pool's) are queued or running."""
+        if self.pool is None:
+            return sum(1 for _ in futures)
+        return sum(1 for f in futures if not f.done())
+
+    def wait(self, head, futures) -> bool:
+        """Wait until `head` or another of `futures` finishes; True where `head` has
+        not (a later candidate finished first, and its thread may take a new one).
+        Reporting stays in order; only the submitting does not wait for the head."""
+        if self.pool is None or head.done():
+            return False
+        import concurrent.futures
+
+        running = [f for f in futures if not f.done()]
+        concurrent.futures.wait(running, return_when=concurrent.futures.FIRST_COMPLETED)
+        return not head.done()
 
     def submit(self, function, *args):
         if self.pool is None:
