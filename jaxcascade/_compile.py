@@ -268,6 +268,7 @@ def release() -> None:
     jax.clear_caches()
     gc.collect()
     _released_at = compile_count()
+    trim()
 
 
 def mappings() -> int | None:
@@ -278,6 +279,28 @@ def mappings() -> int | None:
             return maps.read().count(b"\n")  # one line a mapping
     except OSError:
         return None
+
+
+@functools.cache
+def _malloc_trim():
+    """glibc's `malloc_trim`, or None where the C library has none (macOS, musl)."""
+    import ctypes
+
+    try:
+        return ctypes.CDLL("libc.so.6").malloc_trim
+    except (OSError, AttributeError):
+        return None
+
+
+def trim() -> None:
+    """Hand the allocator's free memory back to the system (glibc's `malloc_trim`; a
+    no-op where the C library has none). glibc keeps what a thread freed in that
+    thread's arena: the programs `release` frees stay resident without it (the
+    Wiener-Hammerstein stand-in's loop, two threads, warm cache: 2.1 GB at its end
+    without, 1.6 GB with; a release then gives back about 1 GB instead of 40 MB)."""
+    function = _malloc_trim()
+    if function is not None:
+        function(0)
 
 
 def over_bound(programs: int = PROGRAMS, mapped: int = MAPPINGS) -> bool:

@@ -89,6 +89,17 @@ def test_bound_releases_past_its_program_limit_and_keeps_programs_under_it():
         assert bound(programs=10**6, mapped=0)
 
 
+def test_release_hands_the_freed_memory_back(monkeypatch):
+    # glibc keeps what a thread freed in its arena: `release` trims it (`_compile.trim`),
+    # else the programs it freed stay resident (the Wiener-Hammerstein stand-in's loop)
+    from jaxcascade import _compile
+
+    calls = []
+    monkeypatch.setattr(_compile, "_malloc_trim", lambda: calls.append)
+    _compile.release()
+    assert calls == [0]
+
+
 # Issue 33: traced programs kept across processes (`_compile.exported`). Run in a fresh
 # interpreter: the persistent cache it needs stays off in the test process (conftest).
 KEPT = r"""
