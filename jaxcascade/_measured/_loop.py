@@ -1155,8 +1155,6 @@ def model_error_loop(
                     saved = store.load(item)
                     future = workers.submit(_candidate_work, name, action, saved, context)
                     pending.append((task, item, saved, future))
-                    # past the bound, no new candidate until those in flight are reported
-                    drain = workers.pool is not None and over_bound()
                 if not pending:
                     if drain:  # the bound's release waited for the candidates in flight
                         bound()
