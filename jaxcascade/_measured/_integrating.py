@@ -12,7 +12,10 @@ output as any other state:
   differences of that window, and `y(t) = y_measured(start - 1) + sum of dy(start..t)`.
 
 `integrates(u, y)` is the test: no stable ARX model up to order 4 fits the record, or the
-best one has a pole within 1e-3 of the unit circle (`_arx.best_arx`); `integration`
+best one has a pole within 1e-3 of the unit circle (`_arx.best_arx`) that a zero does not
+cancel (its gain at zero frequency large against the output's spread over the input's: an
+integrator's is unbounded; a friction force against a displacement has a slow pole that a
+zero nearly cancels, and a bounded output); `integration`
 applies it to the loop's estimation records under the option `auto`, `yes` or `no`
 (`--integrate`) and says what it did in one sentence.
 """
@@ -28,17 +31,35 @@ from ._arx import best_arx
 # A pole this close to 1 (or beyond) in the ARX peer is an integrator: at 1 kHz it is a
 # time constant of 1 s held for ever in free run.
 INTEGRATOR_POLE = 0.999
+# ... and an integrator's gain at zero frequency, |B(1) / A(1)|, is at least this many times
+# std(y) / std(u): an integrator's is unbounded (an axis under proportional control, whose
+# fitted pole leaks a little: 15 to 85); a slow pole nearly cancelled by a zero is not one
+# (the friction damper's force against its displacement at 1 kHz, pole 0.9991: 1.4).
+INTEGRATOR_GAIN = 5.0
+
+
+def static_gain(arx, u, y) -> float:
+    """The ARX model's gain at zero frequency, |B(1) / A(1)|, in units of
+    std(y) / std(u) (infinite where A(1) = 0)."""
+    a1 = 1.0 + float(np.sum(arx.a))
+    b1 = float(np.sum(arx.b))
+    scale = np.std(u) / max(float(np.std(y)), np.finfo(float).tiny)
+    return abs(b1) * scale / abs(a1) if a1 != 0 else np.inf
 
 
 def integrates(u, y) -> float | None:
-    """The largest pole magnitude of the best ARX fit of `(u, y)` when it is at least
-    `INTEGRATOR_POLE` or no stable ARX model fits (the output integrates its input), else
-    None."""
+    """The largest pole magnitude of the best ARX fit of `(u, y)` when no stable ARX
+    model fits, or when it is at least `INTEGRATOR_POLE` and the fit's gain at zero
+    frequency at least `INTEGRATOR_GAIN` (`static_gain`): the output integrates its
+    input; else None."""
     try:
-        pole = best_arx(u, y).largest_pole
+        arx = best_arx(u, y)
     except ValueError:
         return best_arx(u, y, stable=False).largest_pole
-    return pole if pole >= INTEGRATOR_POLE else None
+    pole = arx.largest_pole
+    if pole < INTEGRATOR_POLE or static_gain(arx, u, y) < INTEGRATOR_GAIN:
+        return None
+    return pole
 
 
 INTEGRATE_OPTIONS = ("auto", "yes", "no")
