@@ -218,6 +218,35 @@ def test_a_kink_refines_a_static_map_already_before_the_second_block():
     assert InnerKink.starts_records(kinked, [(u, y, residual)]) == []
 
 
+def test_the_backward_step_takes_out_an_effect_a_later_one_made_unnecessary():
+    # A record with an output offset alone, and the model of a loop that added a drift
+    # first (a drift explains part of a mean too) and the offset after it: the backward
+    # step takes the drift out. On a record with both, both stay.
+    from jaxcascade._measured._effects import OutputDrift
+    from jaxcascade._measured._loop import _no_effect, _prune, evaluate, refit
+
+    offset_only = UNDECLARED["output_offset"]()[0]
+    both = offset_only.with_(effects=(OutputDrift(jnp.asarray(0.2)), *offset_only.effects))
+    rule = {"t_threshold": 3.0, "min_gain": 0.02}
+    for truth, expected in ((offset_only, ["output_drift"]), (both, [])):
+        u, y = undeclared_record(truth, jax.random.PRNGKey(1), N, SNR)
+        u_val, y_val = undeclared_record(truth, jax.random.PRNGKey(2), N, SNR)
+        # the loop's model: the truth's cascade, a drift, then the offset, fitted
+        start = both.with_(effects=(OutputDrift(jnp.asarray(0.02)), *offset_only.effects))
+        fitted = refit(start, _no_effect(start.params), [u], [y])[0]
+        model = fitted.with_(effects=fitted.effects[:-1])
+
+        def assess(m, u_val=u_val, y_val=y_val):
+            return evaluate(m, u_val, y_val)
+
+        gone = list(_prune(model, [u], [y], assess, rule))
+        assert [name for name, *_ in gone] == expected
+        if gone:
+            _, reduced, evaluation = gone[-1]
+            assert reduced.names == ("output_offset",)
+            assert evaluation.error <= 1.1 / SNR
+
+
 def test_every_effect_declares_a_signature():
     tests = {
         "autocorrelation",

@@ -609,7 +609,9 @@ class LoopResult:
       residual tests.
     - `base`, `final`: the declared cascade (as fitted) and the final model
       (`ExtendedModel`, model units); `added`: the effects added, in order; `actions`:
-      what each round did (`{"effect", "action" ("add" or "replace"), "round"}`).
+      what each round did (`{"effect", "action" ("add" or "replace"), "round"}`), then
+      each effect the backward step took out (`"remove"`, `_prune`) and the linear
+      floor's replacement (`"floor"`).
     - `candidates`: every `Candidate` tried, with its score and significance test;
       `steps`: `(label, model, evaluation)` of each step on the validation record.
     - `t_threshold`, `min_gain`: the significance rule the loop applied.
@@ -1249,6 +1251,23 @@ def model_error_loop(
         # The round's candidates compiled programs of their own structures (each
         # stays mapped in memory until released): freed past the bound.
         bound()
+    # The backward step: an effect that a later one made unnecessary goes (`_prune`).
+    if len(model.effects) > 1 and model.cascade:
+        rounds = max((a["round"] for a in actions if a["round"] is not None), default=0)
+        rule = {
+            "t_threshold": t_threshold,
+            "min_gain": min_gain,
+            "validation_scale": float(np.var(scored_val)),
+        }
+        for name, reduced, evaluation in _prune(model, us, ys, assess, rule):
+            say(
+                f"backward step: {name} is no longer needed (validation error without it "
+                f"{evaluation.error:.4g}); it goes"
+            )
+            model, current = reduced, evaluation
+            added.remove(name)
+            actions.append({"effect": name, "action": "remove", "round": rounds + 1})
+            steps.append((f"- {name} (a later effect made it unnecessary)", model, current))
     # never worse on the validation records than the linear floor
     if (
         floor is not None
@@ -1296,6 +1315,49 @@ def model_error_loop(
 # A scored record (validation, test) is simulated, not fitted: it needs the state
 # initialisation window and this many scored samples after it.
 MIN_SCORED = 20
+
+
+def _prune(model: ExtendedModel, us, ys, assess, judged_by):
+    """The backward step of a stepwise selection (forward, then backward): each effect of
+    `model` but its last, earliest first, is taken out and the rest refitted
+    from the current estimates; the effect goes where the model with it would not be
+    added to the model without it by the loop's own rule (`_score_candidate`: the
+    Diebold-Mariano statistic above the threshold and the gain above `min_gain`), as
+    when a curved backlash explained a little of a residual whose cause a later effect
+    (the inner polynomial of a Wiener-Hammerstein sandwich) then explained in full.
+    Structural effects (orders) and the noise model are not taken out. Yields
+    `(name, model, evaluation)` of each effect that goes, with the model without it."""
+    k = 0
+    while k < len(model.effects) - 1:
+        name = model.effects[k].name
+        rest = model.with_(effects=model.effects[:k] + model.effects[k + 1 :])
+        refitted, _, _ = refit(rest, _no_effect(rest.params), us, ys)
+        reduced = refitted.with_(effects=refitted.effects[:-1])
+        evaluation = assess(reduced)
+        records = [
+            (np.asarray(u), np.asarray(y), np.asarray(y) - _simulate(reduced, u)[0])
+            for u, y in zip(us, ys, strict=True)
+        ]
+        # the current model judged as a candidate over the model without the effect
+        kept = _score_candidate(
+            name,
+            name,
+            model,
+            reduced,
+            evaluation,
+            set(),
+            0,
+            us,
+            ys,
+            records,
+            assess,
+            **judged_by,
+        )
+        if kept.significant or not np.isfinite(evaluation.error):
+            k += 1
+            continue
+        model = reduced
+        yield name, model, evaluation
 
 
 def check_lengths(lengths: list[int], orders: Orders, where: str = "the loop") -> None:
