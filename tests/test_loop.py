@@ -227,7 +227,6 @@ def test_the_backward_step_takes_out_an_effect_a_later_one_made_unnecessary():
 
     offset_only = UNDECLARED["output_offset"]()[0]
     both = offset_only.with_(effects=(OutputDrift(jnp.asarray(0.2)), *offset_only.effects))
-    rule = {"t_threshold": 3.0, "min_gain": 0.02}
     for truth, expected in ((offset_only, ["output_drift"]), (both, [])):
         u, y = undeclared_record(truth, jax.random.PRNGKey(1), N, SNR)
         u_val, y_val = undeclared_record(truth, jax.random.PRNGKey(2), N, SNR)
@@ -239,7 +238,7 @@ def test_the_backward_step_takes_out_an_effect_a_later_one_made_unnecessary():
         def assess(m, u_val=u_val, y_val=y_val):
             return evaluate(m, u_val, y_val)
 
-        gone = list(_prune(model, [u], [y], assess, rule))
+        gone = list(_prune(model, assess(model), [u], [y], assess, 0.02))
         assert [name for name, *_ in gone] == expected
         if gone:
             _, reduced, evaluation = gone[-1]

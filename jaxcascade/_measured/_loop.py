@@ -1254,12 +1254,7 @@ def model_error_loop(
     # The backward step: an effect that a later one made unnecessary goes (`_prune`).
     if len(model.effects) > 1 and model.cascade:
         rounds = max((a["round"] for a in actions if a["round"] is not None), default=0)
-        rule = {
-            "t_threshold": t_threshold,
-            "min_gain": min_gain,
-            "validation_scale": float(np.var(scored_val)),
-        }
-        for name, reduced, evaluation in _prune(model, us, ys, assess, rule):
+        for name, reduced, evaluation in _prune(model, current, us, ys, assess, min_gain):
             say(
                 f"backward step: {name} is no longer needed (validation error without it "
                 f"{evaluation.error:.4g}); it goes"
@@ -1317,47 +1312,32 @@ def model_error_loop(
 MIN_SCORED = 20
 
 
-def _prune(model: ExtendedModel, us, ys, assess, judged_by):
+def _prune(model: ExtendedModel, current: Evaluation, us, ys, assess, min_gain: float):
     """The backward step of a stepwise selection (forward, then backward): each effect of
-    `model` but its last, earliest first, is taken out and the rest refitted
-    from the current estimates; the effect goes where the model with it would not be
-    added to the model without it by the loop's own rule (`_score_candidate`: the
-    Diebold-Mariano statistic above the threshold and the gain above `min_gain`), as
+    `model` but its last, earliest first, is taken out and the rest refitted from the
+    current estimates; the effect goes where the model without it is within `min_gain`
+    of the model with it on the validation records (`1 - error_with / error_without <=
+    min_gain`: the loop would not add it there, whatever the significance test says), as
     when a curved backlash explained a little of a residual whose cause a later effect
     (the inner polynomial of a Wiener-Hammerstein sandwich) then explained in full.
-    Structural effects (orders) and the noise model are not taken out. Yields
-    `(name, model, evaluation)` of each effect that goes, with the model without it."""
+    Structural effects (orders: their marker in `model.effects`) and the noise model are
+    not taken out. `current`: the model's evaluation. Yields `(name, model, evaluation)`
+    of each effect that goes, with the model without it."""
     k = 0
     while k < len(model.effects) - 1:
         name = model.effects[k].name
+        if name in STRUCTURAL:
+            k += 1
+            continue
         rest = model.with_(effects=model.effects[:k] + model.effects[k + 1 :])
         refitted, _, _ = refit(rest, _no_effect(rest.params), us, ys)
         reduced = refitted.with_(effects=refitted.effects[:-1])
         evaluation = assess(reduced)
-        records = [
-            (np.asarray(u), np.asarray(y), np.asarray(y) - _simulate(reduced, u)[0])
-            for u, y in zip(us, ys, strict=True)
-        ]
-        # the current model judged as a candidate over the model without the effect
-        kept = _score_candidate(
-            name,
-            name,
-            model,
-            reduced,
-            evaluation,
-            set(),
-            0,
-            us,
-            ys,
-            records,
-            assess,
-            **judged_by,
-        )
-        if kept.significant or not np.isfinite(evaluation.error):
-            k += 1
+        if not evaluation.error * (1 - min_gain) <= current.error:
+            k += 1  # the effect still earns its place (or the model without it failed)
             continue
-        model = reduced
-        yield name, model, evaluation
+        model, current = reduced, evaluation
+        yield name, model, current
 
 
 def check_lengths(lengths: list[int], orders: Orders, where: str = "the loop") -> None:
