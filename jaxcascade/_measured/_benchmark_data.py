@@ -351,10 +351,13 @@ _PARTIAL = {
 # NARX baseline: the mechanism the loop's library does not hold.
 MECHANISMS = {
     "EMPS": (
-        "an integrating axis held in a closed position loop with Coulomb and viscous "
-        "friction: the loop models the velocity with friction, but the position's drift "
-        "over the test record is held by the feedback that the closed loop adds, which "
-        "no open-loop path from the force holds"
+        "an integrating axis held in a closed position loop, with Coulomb and viscous "
+        "friction; the test record adds force pulses beyond the training record's range "
+        "to the same trajectory, and the validation part of the training record, which "
+        "has none, cannot tell a model of the plant (the force's effect on the velocity "
+        "through inertia and friction) from one that follows the controller's force and "
+        "misses the pulses: the loop keeps whichever fits the validation record better, "
+        "and no rule of it knows the physics that would prefer the plant"
     ),
     "CED": (
         "two motors driving a pulley through a flexible belt, the speed read by a "
