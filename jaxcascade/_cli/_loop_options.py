@@ -133,8 +133,9 @@ def add_parser(subparsers, run) -> None:
         "--min-gain",
         type=float,
         default=d.MIN_GAIN,
-        help="... and it lowers the validation NRMSE by at least this fraction "
-        f"(default {d.MIN_GAIN:g})",
+        help="... and it lowers the validation NRMSE by at least this fraction; when "
+        "the loop stops, an effect whose removal costs less than this goes (the "
+        f"backward step) (default {d.MIN_GAIN:g})",
     )
     add(
         "--seed",
