@@ -1260,7 +1260,8 @@ def model_error_loop(
                 f"{evaluation.error:.4g}); it goes"
             )
             model, current = reduced, evaluation
-            added.remove(name)
+            if name in added:  # (every effect of a cascade's model was added by a round)
+                added.remove(name)
             actions.append({"effect": name, "action": "remove", "round": rounds + 1})
             steps.append((f"- {name} (a later effect made it unnecessary)", model, current))
     # never worse on the validation records than the linear floor
