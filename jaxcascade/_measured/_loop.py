@@ -315,6 +315,13 @@ def refit(model: ExtendedModel, start: Start, u, y, max_steps: int = 150):
     return one_start(models, best), float(costs[best]), int(status[best])
 
 
+def refined(model: ExtendedModel, u, y, max_steps: int = 150) -> ExtendedModel:
+    """`model` refitted from its own estimates, its structure kept (`refit` with a start
+    that adds nothing, `_no_effect`)."""
+    refitted, _, _ = refit(model, _no_effect(model.params), u, y, max_steps)
+    return refitted.with_(effects=refitted.effects[:-1])
+
+
 def fit_parallel(model: ExtendedModel, effect_class, u, y, alternations: int = 1):
     """Add a parallel path linear in its weights (`Effect.linear`) to `model`: its
     weights by ridge least squares on the residual of the current model (structure by
@@ -336,8 +343,7 @@ def fit_parallel(model: ExtendedModel, effect_class, u, y, alternations: int = 1
         targets = tuple(w - _parallel(effect, v) for v, w in zip(us, ys, strict=True))
         if not current.cascade and not current.effects:
             break  # nothing to refit under the path
-        refitted, _, _ = refit(current, _no_effect(current.params), us, targets)
-        current = refitted.with_(effects=refitted.effects[:-1])
+        current = refined(current, us, targets)
         effect, label = effect_class.fit_records(current, residuals(current))
     final = current.with_(effects=(*current.effects, effect))
     errors = np.concatenate([w - _simulate(final, v)[0] for v, w in zip(us, ys, strict=True)])
@@ -1330,9 +1336,7 @@ def _prune(model: ExtendedModel, current: Evaluation, us, ys, assess, min_gain: 
         if name in STRUCTURAL:
             k += 1
             continue
-        rest = model.with_(effects=model.effects[:k] + model.effects[k + 1 :])
-        refitted, _, _ = refit(rest, _no_effect(rest.params), us, ys)
-        reduced = refitted.with_(effects=refitted.effects[:-1])
+        reduced = refined(model.with_(effects=model.effects[:k] + model.effects[k + 1 :]), us, ys)
         evaluation = assess(reduced)
         if not evaluation.error * (1 - min_gain) <= current.error:
             k += 1  # the effect still earns its place (or the model without it failed)
@@ -1594,8 +1598,7 @@ def _fit_noise(model, us, ys, records):
     noise, p_value = ARNoise.fit_records([r[2] for r in records])
     noise_model = model.with_(noise=noise)
     if noise.order and (model.cascade or model.effects):
-        refitted, _, _ = refit(noise_model, _no_effect(model.params), us, ys)
-        noise_model = refitted.with_(effects=refitted.effects[:-1], noise=noise)
+        noise_model = refined(noise_model, us, ys).with_(noise=noise)
     return noise_model, float(p_value)
 
 
