@@ -13,6 +13,7 @@ from jaxcascade import _defaults
 from jaxcascade._cli import build_parser
 from jaxcascade._data import read_record, record_from_arrays
 from jaxcascade._measured._loop import model_error_loop
+from jaxcascade._system._model import Orders
 from jaxcascade._workflow._fit import fit_record
 from jaxcascade._workflow._loop import loop_benchmark, loop_records
 
@@ -31,7 +32,7 @@ def test_every_measured_data_command_takes_the_same_defaults(command):
     assert args.scaling == _defaults.SCALING
     assert args.detrend == _defaults.DETREND
     assert args.decimate == _defaults.DECIMATE
-    assert args.orders == _defaults.ORDERS
+    assert args.orders == Orders.parse(_defaults.ORDERS)  # parsed as it is read
     if command == "fit":
         assert args.estimator == _defaults.ESTIMATOR
 
@@ -66,7 +67,8 @@ def test_the_loop_takes_the_command_s_defaults_in_python():
     }
     for option, argument in pairs.items():
         assert getattr(args, option) == call[argument].default, option
-    assert args.orders == call["orders"].default == _defaults.ORDERS
+    assert call["orders"].default == _defaults.ORDERS
+    assert args.orders == Orders.parse(_defaults.ORDERS)
     # the engine: the same rule for the window (None: the command's) and the threads
     assert engine["init_samples"].default is None and engine["threads"].default is None
     assert engine["max_effects"].default == args.max_effects

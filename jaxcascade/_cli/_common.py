@@ -79,10 +79,11 @@ def add_signal_arguments(parser, *, required: bool = False) -> None:
     )
 
 
-def add_record_arguments(parser, *, required: bool = False) -> None:
-    """Options shared by the commands that read a measured record (`fit`, `loop`), with
-    the measured-data defaults of `_defaults`; their records are record specs
-    (`RECORD_SPEC`), read by `read_record(spec, **record_options(args))`."""
+def add_record_arguments(parser, command: str, *, required: bool = False) -> None:
+    """Options shared by the commands that read a measured record (`fit`, `loop`, named
+    by `command`), with the measured-data defaults of `_defaults`; their records are
+    record specs (`RECORD_SPEC`), read by `read_record(spec, **record_options(args))`;
+    `--orders` is parsed as the option is read (`orders_option`)."""
     from .. import _defaults
 
     scaling = _defaults.SCALING
@@ -98,6 +99,7 @@ def add_record_arguments(parser, *, required: bool = False) -> None:
     parser.add_argument(
         "--orders",
         default=_defaults.ORDERS,
+        type=orders_option(command),
         help=f"declared nR,nL,r,p (default {_defaults.ORDERS}; at most 8,8,16,16, and the "
         "record needs "
         "10 samples per parameter)",
@@ -159,6 +161,29 @@ def parse_orders(text: str, command: str | None = None):
     return orders
 
 
+def orders_option(command: str | None = None):
+    """An argparse type: `--orders` parsed as it is read (`parse_orders`), so a command
+    gets `Orders` in its arguments."""
+
+    def parse(text: str):
+        return parse_orders(text, command)
+
+    return parse
+
+
+def span_option(option: str):
+    """An argparse type: `START:STOP` as two integers (samples of the file as stored)."""
+
+    def parse(text: str) -> tuple[int, int]:
+        try:
+            start, stop = (int(part) for part in text.split(":"))
+        except ValueError:
+            raise CLIError(f"{option} takes START:STOP in samples, got {text!r}.") from None
+        return start, stop
+
+    return parse
+
+
 def number_list(kind, option: str):
     """An argparse type: comma-separated numbers of `kind`, at least one."""
 
@@ -175,7 +200,7 @@ def number_list(kind, option: str):
 
 
 def name_list(text: str) -> list[str]:
-    """Comma-separated names."""
+    """Comma-separated names (an argparse type too)."""
     return [part.strip() for part in text.split(",") if part.strip()]
 
 

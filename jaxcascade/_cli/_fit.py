@@ -20,7 +20,6 @@ from ._common import (
     add_record_arguments,
     estimator_help,
     examples,
-    parse_orders,
     record_options,
     strict_json,
 )
@@ -40,7 +39,7 @@ def run_fit(args) -> int:
     from .._metrics import fit_percent
     from .._workflow._fit import fit_record
 
-    orders = parse_orders(args.orders, "fit")
+    orders = args.orders  # parsed as the option was read (`orders_option`)
     if args.decimate < 1:
         raise CLIError(f"--decimate must be an integer >= 1, got {args.decimate}.")
     estimator(args.estimator)  # unknown names fail here, before reading data
@@ -96,7 +95,7 @@ def add_parser(subparsers) -> None:
         ),
     )
     parser.add_argument("data", metavar="DATA", help=f"the record, {RECORD_SPEC}")
-    add_record_arguments(parser)
+    add_record_arguments(parser, "fit")
     parser.add_argument(
         "--estimator",
         default=_defaults.ESTIMATOR,

@@ -17,24 +17,11 @@ import sys
 
 from ._common import (
     CLIError,
-    name_list,
-    parse_orders,
     record_options,
     strict_json,
     writable_folder,
 )
 from ._loop_options import DefaultDecimation
-
-
-def _span(text: str | None, option: str) -> tuple[int, int] | None:
-    """`START:STOP` as two integers (samples of the file as stored), or None."""
-    if text is None:
-        return None
-    try:
-        start, stop = (int(part) for part in text.split(":"))
-    except ValueError:
-        raise CLIError(f"{option} takes START:STOP in samples, got {text!r}.") from None
-    return start, stop
 
 
 def _check(args) -> None:
@@ -62,18 +49,16 @@ def _check(args) -> None:
 
 
 def _settings(args, checkpoints):
-    """The command line as one `LoopSettings` (`_workflow._loop`): its options checked
-    against each other, its values parsed; the orders last, as `Orders`."""
+    """The command line as one `LoopSettings` (`_workflow._loop`); its values were
+    parsed as argparse read them (`--orders` as `Orders`, the windows as
+    `(start, stop)`, `--effects` as names) and checked against each other (`_check`)."""
     from .._workflow._loop import LoopSettings
-
-    _check(args)
 
     def say(message):
         if not args.quiet:
             print(message, file=sys.stderr, flush=True)
 
     given = type(args.decimate) is not DefaultDecimation
-    test_windows = tuple(_span(t, "--test-window") for t in args.test_window or [])
     return LoopSettings(
         train=tuple(args.train),
         validate=tuple(args.validate or ()),
@@ -84,10 +69,10 @@ def _settings(args, checkpoints):
         data=args.data,
         max_samples=args.max_samples,
         decimate=args.decimate if given else None,
-        window=_span(args.window, "--window"),
-        test_windows=test_windows or None,
+        window=args.window,
+        test_windows=tuple(args.test_window) if args.test_window else None,
         max_effects=args.max_effects,
-        effects=None if args.effects is None else tuple(name_list(args.effects)),
+        effects=None if args.effects is None else tuple(args.effects),
         init_samples=args.init_samples,
         dm_threshold=args.dm_threshold,
         min_gain=args.min_gain,
@@ -99,7 +84,7 @@ def _settings(args, checkpoints):
         checkpoints=checkpoints,
         progress=say,
         command="jaxcascade loop " + " ".join(sys.argv[2:]),
-        orders=parse_orders(args.orders, "loop"),
+        orders=args.orders,
     )
 
 
@@ -120,9 +105,10 @@ def _run_loop(args, checkpoints) -> int:
     from .._measured._report import summary
     from .._workflow._loop import loop_command
 
-    settings = _settings(args, checkpoints)
+    _check(args)
     if args.report:
         writable_folder(args.report, "--report")
+    settings = _settings(args, checkpoints)
     run = loop_command(settings)
     if args.report:
         run.report(args.report, figures=args.figures)

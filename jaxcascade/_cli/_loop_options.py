@@ -7,7 +7,14 @@ from __future__ import annotations
 import argparse
 
 from .._names import EFFECTS, NOISE_MODEL, NOISE_MODEL_DESCRIPTION
-from ._common import RECORD_SPEC, add_record_arguments, examples, kind_help
+from ._common import (
+    RECORD_SPEC,
+    add_record_arguments,
+    examples,
+    kind_help,
+    name_list,
+    span_option,
+)
 from ._loop_resume import add_arguments as add_resume_arguments
 
 
@@ -72,7 +79,7 @@ def add_parser(subparsers, run) -> None:
         help="with --benchmark: at most this many estimation samples (the latest of the "
         f"training data) and a quarter of it for validation (default {d.MAX_SAMPLES})",
     )
-    add_record_arguments(parser, required=False)
+    add_record_arguments(parser, "loop", required=False)
     # the measured-data default (1), or with --benchmark the benchmarks' rule
     parser.set_defaults(decimate=DefaultDecimation(d.DECIMATE))
     parser._option_string_actions["--decimate"].help = (
@@ -89,11 +96,13 @@ def add_parser(subparsers, run) -> None:
     )
     add(
         "--window",
+        type=span_option("--window"),
         help="START:STOP: also score the validation record on these samples of the file "
         "as stored (before decimation)",
     )
     add(
         "--effects",
+        type=name_list,
         help="NAME,NAME: the effects of the library the loop considers (default: all): "
         + kind_help({**EFFECTS, NOISE_MODEL: NOISE_MODEL_DESCRIPTION}),
     )
@@ -109,6 +118,7 @@ def add_parser(subparsers, run) -> None:
         "--test-window",
         nargs="+",
         metavar="START:STOP",
+        type=span_option("--test-window"),
         help="one scoring window per --test record, in samples of the file as stored",
     )
     add(
