@@ -69,7 +69,7 @@ Nothing here changes JAX's configuration: enable float64 yourself where you need
 # The public names are imported on first use (PEP 562), so that `import jaxcascade` and
 # the command line's `--help` do not import JAX; `dir(jaxcascade)` lists them all.
 
-import importlib
+import importlib as _importlib
 
 from ._version import __version__ as __version__
 
@@ -245,7 +245,7 @@ def __getattr__(name: str):
     module = _EXPORTS.get(name)
     if module is None:
         raise AttributeError(f"module 'jaxcascade' has no attribute {name!r}")
-    value = getattr(importlib.import_module(module, __name__), name)
+    value = getattr(_importlib.import_module(module, __name__), name)
     globals()[name] = value  # later lookups skip this function
     return value
 
