@@ -76,6 +76,28 @@ def test_an_integrating_output_names_what_integrate_did():
     assert integration([clean_record], "auto") is None
 
 
+def test_an_integrator_whose_pole_friction_pulled_inside_is_named_with_integrate_yes():
+    # an axis under proportional control with Coulomb friction (`axis_record`, seed 3):
+    # the equation-error fit's pole lies inside the unit circle, so `--integrate auto`
+    # leaves the record to a stable model; its gain at zero frequency is an integrator's
+    from jaxcascade._measured._arx import best_arx
+    from jaxcascade._measured._integrating import INTEGRATOR_GAIN, leaky_integrator
+    from jaxcascade._measured._testing import INTEGRATING, axis_record
+
+    key, _ = jax.random.split(jax.random.PRNGKey(3))
+    u, y = axis_record(key, 1025, 30.0, INTEGRATING["velocity_friction"])
+    record = jc.record_from_arrays(u, y, sample_period=0.001)
+    assert integration([record], "auto") is None
+    leaky = leaky_integrator(best_arx(record.u, record.y), record.u, record.y)
+    assert leaky is not None and 0.95 <= leaky[0] < 0.999 and leaky[1] >= INTEGRATOR_GAIN
+    (advice,) = _advice.advise([record.y_physical], leaky=leaky)
+    assert advice.kind == "integrating" and f"|z| = {leaky[0]:.4f}" in advice.evidence
+    assert "--integrate yes" in advice.option and "velocity_friction" in advice.option
+    # a cascade on a broadband input: no slow pole with an integrator's gain
+    u, y = _output()
+    assert leaky_integrator(best_arx(u, y), u, y) is None
+
+
 def test_a_record_leaving_the_estimation_range_is_named():
     # the coverage of the input (`_coverage`) flags it; the advice names the record
     u, y = _output()

@@ -7,7 +7,10 @@ any record):
 
 - `integrating`: the output integrates its input (`_integrating`): the loop modelled its
   difference and still scores poorly (friction on the velocity of a positioning system,
-  or a loop closed around the output), or `--integrate no` left it to a stable model;
+  or a loop closed around the output), or `--integrate no` left it to a stable model, or
+  the ARX peer is stable with a slow pole and an integrator's gain at zero frequency
+  (`_integrating.leaky_integrator`: friction or a controller pulled the integrator's
+  pole inside) and `--integrate auto` did not act on it;
 - `sign_blind`: the output never goes below a floor it touches in sharp V-shaped
   minima (`SIGN_BLIND_TOUCHES` or more, no flat stretch): a sign-blind sensor, |x|, or a
   rectifier;
@@ -136,9 +139,15 @@ def sign_blind(y) -> Advice | None:
     )
 
 
-def integrating(integration: dict | None, unstable_pole: float | None) -> Advice | None:
+def integrating(
+    integration: dict | None,
+    unstable_pole: float | None,
+    leaky: tuple[float, float] | None = None,
+) -> Advice | None:
     """`integrating` (module docstring): `integration` the loop's (`_integrating.
-    integration`), `unstable_pole` the ARX peer's largest pole where no stable one fits."""
+    integration`), `unstable_pole` the ARX peer's largest pole where no stable one fits,
+    `leaky` the stable peer's `(pole, gain)` where `_integrating.leaky_integrator` finds
+    them."""
     if integration is not None:
         pole = integration.get("largest_arx_pole")
         shown = f" (the best ARX model's largest pole at |z| = {pole:.4f})" if pole else ""
@@ -158,6 +167,17 @@ def integrating(integration: dict | None, unstable_pole: float | None) -> Advice
             f"pole is at |z| = {unstable_pole:.4f}): the output integrates its input",
             "leave --integrate at auto (the loop then models the output's difference), or "
             "--integrate yes",
+        )
+    if leaky is not None:
+        pole, gain = leaky
+        return Advice(
+            "integrating",
+            f"The best linear ARX model is stable but its largest pole is at |z| = {pole:.4f} "
+            f"and its gain at zero frequency is {gain:.3g} times std(y) / std(u): an output "
+            "that integrates its input looks so when friction or a controller pulls the "
+            "fitted pole inside the unit circle (--integrate auto did not act on it)",
+            "--integrate yes models the output's difference and integrates it back (with "
+            "velocity_friction for friction on a positioning system's velocity)",
         )
     return None
 
@@ -196,6 +216,7 @@ def advise(
     *,
     integration: dict | None = None,
     unstable_pole: float | None = None,
+    leaky: tuple[float, float] | None = None,
     uncovered: list[str] = (),
     failed: list[str] = (),
 ) -> list[Advice]:
@@ -203,7 +224,7 @@ def advise(
     `outputs`: the estimation records' outputs in their own units (each checked alone,
     the first finding of a kind kept); the rest what the loop found."""
     found = []
-    advice = integrating(integration, unstable_pole)
+    advice = integrating(integration, unstable_pole, leaky)
     if advice is not None:
         found.append(advice)
     for rule in (sign_blind, clipped, quantised):

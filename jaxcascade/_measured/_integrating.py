@@ -36,6 +36,15 @@ INTEGRATOR_POLE = 0.999
 # fitted pole leaks a little: 15 to 85); a slow pole nearly cancelled by a zero is not one
 # (the friction damper's force against its displacement at 1 kHz, pole 0.9991: 1.4).
 INTEGRATOR_GAIN = 5.0
+# A stable ARX fit whose largest pole is at least this close to 1, with an integrator's
+# gain (`INTEGRATOR_GAIN`), is an integrator whose pole the equation-error fit pulled
+# inside the unit circle (Coulomb friction on an axis under proportional control: poles
+# 0.97 to 0.998, gains 7 to 37 in `_testing.axis_record`'s seeds 2 to 7; CED, Silverbox
+# and the friction damper's records, gains 0.07 to 1.4, none). `--integrate auto` does
+# not act on it (a slow stable system driven by a broadband input has such a gain too:
+# sqrt((1 + p) / (1 - p)) for a first-order pole p under white noise); after a poor
+# score the advice names it (`_advice.integrating`, `leaky_integrator`).
+LEAKY_POLE = 0.95
 
 
 def static_gain(arx, u, y) -> float:
@@ -60,6 +69,18 @@ def integrates(u, y) -> float | None:
     if pole < INTEGRATOR_POLE or static_gain(arx, u, y) < INTEGRATOR_GAIN:
         return None
     return pole
+
+
+def leaky_integrator(arx, u, y) -> tuple[float, float] | None:
+    """`(largest pole, gain at zero frequency)` of the stable ARX fit `arx` of `(u, y)`
+    (`static_gain`'s units) where the pole is at least `LEAKY_POLE` and the gain at least
+    `INTEGRATOR_GAIN`: an output that may integrate its input though `integrates` saw
+    none; else None."""
+    pole = float(arx.largest_pole)
+    if not LEAKY_POLE <= pole < 1.0:
+        return None
+    gain = static_gain(arx, u, y)
+    return (pole, gain) if gain >= INTEGRATOR_GAIN else None
 
 
 INTEGRATE_OPTIONS = ("auto", "yes", "no")

@@ -120,12 +120,19 @@ class LoopRun:
         a poor score in `warnings`."""
         from .._measured import _coverage
         from .._measured._advice import advise
+        from .._measured._integrating import leaky_integrator
 
         uncovered = sorted({record for record, _ in _coverage.uncovered(self.coverage)})
+        leaky = None
+        if self.integrating is None and self.arx_unstable_pole is None:
+            # the peer's own records: the estimation records joined, as it was fitted
+            u = np.concatenate([r.u for r in self.estimation])
+            leaky = leaky_integrator(self.arx, u, np.concatenate([r.y for r in self.estimation]))
         return advise(
             [r.y_physical for r in self.estimation],
             integration=self.integrating,
             unstable_pole=self.arx_unstable_pole,
+            leaky=leaky,
             uncovered=uncovered,
             failed=list(self.result.after.tests.failed),
         )
