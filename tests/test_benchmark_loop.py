@@ -4,9 +4,11 @@ rule, one-line errors, and a run on CED's records as distributed (issue 32)."""
 import json
 import pathlib
 
+import jax
 import numpy as np
 import pytest
 
+import jaxcascade as jc
 from jaxcascade._cli import main
 from jaxcascade._measured._benchmark_protocol import (
     band_edge,
@@ -201,6 +203,32 @@ def test_an_integrating_output_is_scored_through_its_difference():
     arx = best_arx(u, slow)
     assert arx.largest_pole >= INTEGRATOR_POLE and static_gain(arx, u, slow) < INTEGRATOR_GAIN
     assert integrates(u, slow) is None
+
+
+def test_an_integrator_whose_pole_friction_pulled_inside_is_chosen_by_validation():
+    # An axis under proportional control with Coulomb friction (`axis_record`, seed 3):
+    # the equation-error ARX fit's pole lies inside the unit circle (0.97), but its gain
+    # at zero frequency is an integrator's (`leaky_integrator`), so `--integrate auto`
+    # fits the declared cascade on the output and on its difference and keeps the
+    # difference, which the validation record scores far better; with `no`, the output.
+    from jaxcascade._measured._integrating import integration
+    from jaxcascade._measured._testing import INTEGRATING, axis_record
+
+    k_est, k_val = jax.random.split(jax.random.PRNGKey(3))
+    records = [
+        jc.record_from_arrays(*axis_record(k, 1025, 30.0, INTEGRATING["velocity_friction"]))
+        for k in (k_est, k_val)
+    ]
+    assert integration(records[:1], "auto") is None  # no pole within 1e-3 of 1
+    run = jc.loop_records(records[0], records[1], max_effects=0, outliers="keep")
+    leaky = run.integrating["leaky"]
+    assert run.integrating["option"] == "auto" and 0.95 <= run.integrating["largest_arx_pole"]
+    assert leaky["difference_error"] < 0.5 * leaky["level_error"]
+    assert run.result.before.error == pytest.approx(leaky["difference_error"], rel=1e-9)
+    assert "declared cascade fitted on the output's difference" in run.integrating["sentence"]
+    kept = jc.loop_records(records[0], records[1], max_effects=0, integrate="no", outliers="keep")
+    assert kept.integrating is None
+    assert kept.result.before.error == pytest.approx(leaky["level_error"], rel=1e-9)
 
 
 @needs_data

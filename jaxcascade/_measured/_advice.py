@@ -10,7 +10,8 @@ any record):
   or a loop closed around the output), or `--integrate no` left it to a stable model, or
   the ARX peer is stable with a slow pole and an integrator's gain at zero frequency
   (`_integrating.leaky_integrator`: friction or a controller pulled the integrator's
-  pole inside) and `--integrate auto` did not act on it;
+  pole inside) and the loop modelled the output itself (`--integrate no`, or `auto`
+  where the validation record preferred the declared cascade on the output);
 - `sign_blind`: the output never goes below a floor it touches in sharp V-shaped
   minima (`SIGN_BLIND_TOUCHES` or more, no flat stretch): a sign-blind sensor, |x|, or a
   rectifier;
@@ -175,7 +176,7 @@ def integrating(
             f"The best linear ARX model is stable but its largest pole is at |z| = {pole:.4f} "
             f"and its gain at zero frequency is {gain:.3g} times std(y) / std(u): an output "
             "that integrates its input looks so when friction or a controller pulls the "
-            "fitted pole inside the unit circle (--integrate auto did not act on it)",
+            "fitted pole inside the unit circle, and the loop modelled the output itself",
             "--integrate yes models the output's difference and integrates it back (with "
             "velocity_friction for friction on a positioning system's velocity)",
         )

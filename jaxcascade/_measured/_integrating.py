@@ -17,7 +17,10 @@ cancel (its gain at zero frequency large against the output's spread over the in
 integrator's is unbounded; a friction force against a displacement has a slow pole that a
 zero nearly cancels, and a bounded output); `integration`
 applies it to the loop's estimation records under the option `auto`, `yes` or `no`
-(`--integrate`) and says what it did in one sentence.
+(`--integrate`) and says what it did in one sentence. Where the best stable fit's pole is
+merely slow, with an integrator's gain (`leaky_integrator`: friction pulled the pole
+inside), `auto` lets the validation record choose between the declared cascade fitted on
+the output and on its difference (`leaky_choice`).
 """
 
 from __future__ import annotations
@@ -37,13 +40,14 @@ INTEGRATOR_POLE = 0.999
 # (the friction damper's force against its displacement at 1 kHz, pole 0.9991: 1.4).
 INTEGRATOR_GAIN = 5.0
 # A stable ARX fit whose largest pole is at least this close to 1, with an integrator's
-# gain (`INTEGRATOR_GAIN`), is an integrator whose pole the equation-error fit pulled
+# gain (`INTEGRATOR_GAIN`), may be an integrator whose pole the equation-error fit pulled
 # inside the unit circle (Coulomb friction on an axis under proportional control: poles
-# 0.97 to 0.998, gains 7 to 37 in `_testing.axis_record`'s seeds 2 to 7; CED, Silverbox
-# and the friction damper's records, gains 0.07 to 1.4, none). `--integrate auto` does
-# not act on it (a slow stable system driven by a broadband input has such a gain too:
-# sqrt((1 + p) / (1 - p)) for a first-order pole p under white noise); after a poor
-# score the advice names it (`_advice.integrating`, `leaky_integrator`).
+# 0.97 to 0.998, gains 7 to 37 in `_testing.axis_record`'s seeds 2 to 7; CED, Silverbox,
+# the stand-ins and every record of the friction damper: gains 0.07 to 1.5). It is not
+# one for sure: a slow stable system under a broadband input has such a gain too
+# (sqrt((1 + p) / (1 - p)) for a first-order pole p under white noise). So `--integrate
+# auto` fits the declared cascade both ways there and the validation record chooses
+# (`leaky_choice`, the loop's workflow); after a poor score the advice names it.
 LEAKY_POLE = 0.95
 
 
@@ -81,6 +85,31 @@ def leaky_integrator(arx, u, y) -> tuple[float, float] | None:
         return None
     gain = static_gain(arx, u, y)
     return (pole, gain) if gain >= INTEGRATOR_GAIN else None
+
+
+def leaky_choice(leaky, level: float, difference: float) -> dict | None:
+    """`integration`'s answer for a record with a `leaky_integrator` `(pole, gain)`, once
+    the declared cascade was fitted on the output (validation NRMSE `level`) and on its
+    difference (`difference`, of the output integrated back): the difference's where it
+    scores lower, else None."""
+    if not difference < level:
+        return None
+    pole, gain = leaky
+    sentence = (
+        f"The output integrates its input (the best stable ARX model's largest pole is at "
+        f"|z| = {pole:.4f}, its gain at zero frequency {gain:.3g} times std(y) / std(u); the "
+        f"declared cascade fitted on the output's difference scores validation NRMSE "
+        f"{difference:.4g}, on the output itself {level:.4g}): the loop models its "
+        "difference y(t) - y(t-1) and integrates the model's output back for scoring, its "
+        "position set from the measured output like any other state (--integrate no turns "
+        "this off)."
+    )
+    return {
+        "largest_arx_pole": pole,
+        "option": "auto",
+        "sentence": sentence,
+        "leaky": {"gain": gain, "level_error": level, "difference_error": difference},
+    }
 
 
 INTEGRATE_OPTIONS = ("auto", "yes", "no")

@@ -443,7 +443,13 @@ def _loop(
     from .._estimator._robust import Robust
     from .._measured import _coverage
     from .._measured._arx import arx_peer
-    from .._measured._integrating import differenced, integrated, integration
+    from .._measured._integrating import (
+        differenced,
+        integrated,
+        integration,
+        leaky_choice,
+        leaky_integrator,
+    )
     from .._measured._loop import (
         default_threads,
         initialised_output,
@@ -484,12 +490,12 @@ def _loop(
     # An output that integrates its input (no stable ARX fits it) is modelled through its
     # difference and integrated back for scoring (`_integrating`).
     integrating = integration(estimation, integrate)
-    if integrating is not None:
-        say(integrating["sentence"])
 
-    def fit(estimation, validation, store):
+    def fit(estimation, validation, store, rounds=max_effects, tell=say, difference=None):
+        # `difference`: model the output's difference (default: as `integrating` says)
+        difference = integrating is not None if difference is None else difference
         training, validations = estimation, validation
-        if integrating is not None:
+        if difference:
             training = [differenced(r) for r in estimation]
             validations = [differenced(v) for v in validation]
         result = model_error_loop(
@@ -498,14 +504,14 @@ def _loop(
             [v.u for v in validations] if len(validations) > 1 else validations[0].u,
             [v.y for v in validations] if len(validations) > 1 else validations[0].y,
             orders,
-            max_effects=max_effects,
+            max_effects=rounds,
             sample_period=validations[0].sample_period or 1.0,
             window=window,
-            progress=say,
+            progress=tell,
             effects=effects,
             robust=Robust(retries=retries),
-            init_samples=max(init_samples - 1, 0) if integrating else init_samples,
-            integrating=integrating is not None,
+            init_samples=max(init_samples - 1, 0) if difference else init_samples,
+            integrating=difference,
             t_threshold=dm_threshold,
             min_gain=min_gain,
             key=jax.random.PRNGKey(seed),
@@ -521,6 +527,26 @@ def _loop(
             lambda u, y, start, n: initialised_output(model, u, y, start, n),
         )
         return integrated(*pair) if integrating is not None else pair
+
+    if integrating is None and integrate == "auto":
+        # A stable ARX peer with a slow pole and an integrator's gain (`leaky_integrator`):
+        # the declared cascade fitted both ways, the validation record chooses.
+        u_joined = np.concatenate([r.u for r in estimation])
+        y_joined = np.concatenate([r.y for r in estimation])
+        leaky = leaky_integrator(arx_peer(u_joined, y_joined)[0], u_joined, y_joined)
+        if leaky is not None:
+            say(
+                f"the best stable ARX model's largest pole is at |z| = {leaky[0]:.4f} with an "
+                "integrator's gain: the declared cascade is fitted on the output and on its "
+                "difference, and the validation record chooses"
+            )
+            errors = []
+            for as_difference in (False, True):
+                _, trial = fit(estimation, validation, None, 0, lambda m: None, as_difference)
+                errors.append(trial.before.error)
+            integrating = leaky_choice(leaky, *errors)
+    if integrating is not None:
+        say(integrating["sentence"])
 
     training, result = fit(estimation, validation, checkpoints)
     # Isolated outliers of the estimation and validation records (`_outliers`): left out
