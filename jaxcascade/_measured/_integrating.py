@@ -83,7 +83,7 @@ def leaky_integrator(arx, u, y) -> tuple[float, float] | None:
     pole = float(arx.largest_pole)
     if not LEAKY_POLE <= pole < 1.0:
         return None
-    gain = static_gain(arx, u, y)
+    gain = float(static_gain(arx, u, y))
     return (pole, gain) if gain >= INTEGRATOR_GAIN else None
 
 
