@@ -89,6 +89,8 @@ effects_loop() {  # issue 5: the loop on records with one undeclared effect each
     # issue 32: how often it adds an effect to a clean record (50 seeds, two lengths)
     python benchmarks/effects_loop.py --out results/effects_loop --seed 1
     python benchmarks/false_additions.py --seeds 50 --n 1024,2000 --out results/false_additions
+    # issue 67: --integrate auto on an axis under feedback with friction (8 seeds)
+    python benchmarks/axis_integration.py --out results/axis_integration
 }
 outliers() {  # issue 68, item 5: isolated outliers on clean records (false alarms, 500
     # seeds) and on records with four spikes (the estimates against the clean record's)
