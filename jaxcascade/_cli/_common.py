@@ -145,8 +145,8 @@ def record_options(args) -> dict:
 def parse_orders(text: str, command: str | None = None):
     """`--orders nR,nL,r,p` as `Orders`, or a CLIError naming the option. `command`: a
     command that declares the straight backlash only (`fit`, `loop`), which refuses a
-    fifth number (the branch degree) in one sentence."""
-    from .._system._model import Orders
+    fifth number (the branch degree) in one sentence. Imports no JAX (`_system._orders`)."""
+    from .._system._orders import Orders
 
     try:
         orders = Orders.parse(text)
